@@ -1,0 +1,173 @@
+"""Conjugate Bayesian linear regression: posterior, evidence, predictive.
+
+The model (thesis section 3.3.1) is ``y = X c + e`` with ``e ~ N(0, s^2 W^-1)``, a
+Gaussian prior ``c | s^2 ~ N(mu_0, s^2 V_0)`` and either
+
+* an inverse-gamma prior ``s^2 ~ IG(a, b)`` (the normal-inverse-gamma prior of eq. 3.34),
+  giving a Student-t posterior with ``2 a*`` degrees of freedom and the evidence of
+  eq. 3.35, or
+* a known ``s^2 = 1`` (the noise variance is fully given by ``W``), giving a Gaussian
+  posterior and the Gaussian evidence.
+
+With ``Lambda = X^T W X + V_0^-1`` the posterior update is (eq. 3.36, whitened)::
+
+    mu*  = Lambda^-1 (X^T W y + V_0^-1 mu_0),     V* = Lambda^-1
+    a*   = a + N/2
+    b*   = b + (1/2) [ (y - X mu*)^T W (y - X mu*) + (mu* - mu_0)^T V_0^-1 (mu* - mu_0) ]
+
+The bracket is evaluated as residuals, never as ``y^T y - mu*^T V*^-1 mu*`` (the numerically
+stable form of the thesis's footnote to eq. 3.36). The log evidence is::
+
+    log Z = -N/2 log 2 pi + 1/2 sum log w + a log b - a* log b* + log Gamma(a*) - log Gamma(a)
+            - 1/2 log |Lambda| - 1/2 log |V_0|                            (eq. 3.35)
+
+and with known ``s^2 = 1``: ``... - 1/2 Q_min - 1/2 log|Lambda| - 1/2 log|V_0|``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
+from scipy.special import gammaln
+
+from .errors import IllPosedError
+from .noise_waves import N_PARAMETERS, PARAMETERS
+from .normal_equations import NormalEquations
+from .polynomial_model import Orders, as_orders, coefficient_slices
+
+FloatArray = NDArray[np.float64]
+LOG_2PI = float(np.log(2 * np.pi))
+
+
+@dataclass(frozen=True)
+class CoefficientPrior:
+    """Independent Gaussian priors on the polynomial coefficients, in kelvin.
+
+    ``sd_k`` is one width for all coefficients or one per parameter (unc, cos, sin, NS, L);
+    ``mean_k`` optionally gives prior mean coefficients per parameter name (missing terms
+    are zero). The default, 3000 K about zero, is our reading of the thesis's "spread of 10"
+    on a 300 K scale (section 4.4): wide against any physical noise temperature.
+    """
+
+    sd_k: float | Sequence[float] = 3000.0
+    mean_k: Mapping[str, Sequence[float]] = field(default_factory=dict)
+
+    def vectors(self, orders: Sequence[int]) -> tuple[FloatArray, FloatArray]:
+        """Prior mean and variance of every coefficient, concatenated for ``orders``."""
+        sds = np.broadcast_to(np.asarray(self.sd_k, dtype=float), (N_PARAMETERS,))
+        if np.any(sds <= 0):
+            raise ValueError("prior widths must be > 0")
+        means, variances = [], []
+        for k, n in enumerate(orders):
+            given = np.asarray(self.mean_k.get(PARAMETERS[k], ()), dtype=float)[:n]
+            means.append(np.concatenate([given, np.zeros(n - given.size)]))
+            variances.append(np.full(n, sds[k] ** 2))
+        return np.concatenate(means), np.concatenate(variances)
+
+
+@dataclass(frozen=True)
+class ScalePrior:
+    """Inverse-gamma prior ``IG(a, b)`` on the noise-variance scale ``s^2`` (eq. 3.34)."""
+
+    a: float = 1.0
+    b: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (self.a > 0 and self.b > 0):
+            raise ValueError("the inverse-gamma prior needs a > 0 and b > 0")
+
+
+@dataclass(frozen=True)
+class LinearPosterior:
+    """Posterior of the coefficients of one model.
+
+    ``mean`` and ``scale`` locate a multivariate Student-t with ``dof`` degrees of freedom
+    (``dof = inf``: Gaussian with covariance ``scale``). ``noise_variance`` is the
+    posterior estimate of ``s^2`` (``b*/a*``; 1 when the scale is known).
+    """
+
+    orders: Orders
+    mean: FloatArray
+    scale: FloatArray
+    dof: float
+    log_evidence: float
+    noise_variance: float
+    chi2: float
+    n_rows: int
+
+    @property
+    def covariance(self) -> FloatArray:
+        """Posterior covariance of the coefficients."""
+        if np.isinf(self.dof):
+            return self.scale
+        return self.scale * self.dof / (self.dof - 2.0)
+
+    def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` posterior draws of the coefficient vector, shape ``(n, P)``."""
+        chol = np.linalg.cholesky(self.scale)
+        z = rng.standard_normal((n, self.mean.size)) @ chol.T
+        if not np.isinf(self.dof):
+            z *= np.sqrt(self.dof / rng.chisquare(self.dof, size=(n, 1)))
+        return self.mean + z
+
+    def per_parameter(self) -> dict[str, FloatArray]:
+        """Posterior mean coefficients by parameter name."""
+        return {
+            p: self.mean[s]
+            for p, s in zip(PARAMETERS, coefficient_slices(self.orders), strict=True)
+        }
+
+
+def solve(
+    normal: NormalEquations,
+    orders: Sequence[int],
+    prior_mean: FloatArray,
+    prior_var: FloatArray,
+    scale_prior: ScalePrior | None,
+) -> LinearPosterior:
+    """Posterior and evidence of the sub-model ``orders``.
+
+    ``prior_mean``/``prior_var`` are the ``V_0``-scale prior of that model's coefficients;
+    ``scale_prior=None`` means the noise variance is known (``s^2 = 1``).
+    """
+    orders = as_orders(orders)
+    idx = normal.indices(orders)
+    precision = normal.gram[np.ix_(idx, idx)] + np.diag(1.0 / prior_var)
+    jacobi = np.sqrt(np.diag(precision))
+    try:
+        factor = cho_factor(precision / np.outer(jacobi, jacobi), lower=True)
+    except LinAlgError as err:
+        raise IllPosedError(
+            f"the data do not constrain a model with orders {orders}: "
+            "add calibrators or lower the orders"
+        ) from err
+    rhs = normal.rhs(idx) + prior_mean / prior_var
+    mean = cho_solve(factor, rhs / jacobi) / jacobi
+    inverse = cho_solve(factor, np.diag(1.0 / jacobi)) / jacobi[:, None]
+    inverse = 0.5 * (inverse + inverse.T)
+    chi2 = normal.chi2(mean, idx)
+    q_min = chi2 + float(np.sum((mean - prior_mean) ** 2 / prior_var))
+    log_det_precision = 2.0 * float(np.sum(np.log(np.diag(factor[0])))) + 2.0 * float(
+        np.sum(np.log(jacobi))
+    )
+    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
+    occam = -0.5 * log_det_precision - 0.5 * float(np.sum(np.log(prior_var)))
+    if scale_prior is None:
+        return LinearPosterior(
+            orders, mean, inverse, np.inf, base - 0.5 * q_min + occam, 1.0, chi2, normal.n_rows
+        )
+    a, b = scale_prior.a, scale_prior.b
+    a_star = a + 0.5 * normal.n_rows
+    b_star = b + 0.5 * q_min
+    log_z = (
+        base + a * np.log(b) - a_star * np.log(b_star) + gammaln(a_star) - gammaln(a) + occam
+    )
+    noise_variance = b_star / a_star
+    return LinearPosterior(
+        orders, mean, noise_variance * inverse, 2.0 * a_star, float(log_z), noise_variance,
+        chi2, normal.n_rows,
+    )

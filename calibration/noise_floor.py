@@ -1,0 +1,80 @@
+"""The radiometer noise floor: the Cramer-Rao limit of the calibration error.
+
+For a run whose spectra carry radiometer noise only, the Fisher information of the
+noise-wave coefficients ``c`` (for given orders) is::
+
+    F = sum_if J_if J_if^T / var(Q_if),      J_if = dQ_if / dc
+
+and ``J_if = -x_if / (X_L T_NS)`` with ``x_if`` the Gauss-Newton design row of
+:mod:`calibration.radiometric_solver`, evaluated at the true parameters. Any unbiased
+estimator of a source's calibrated temperature ``T_src(f) = x_src(f)^T c`` then has::
+
+    var(T_src(f)) >= x_src(f)^T F^-1 x_src(f)
+
+The floor of a source is that bound per channel and its root mean square over the band,
+the number against which a solution's error is judged ("distance to the floor").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import cho_factor, solve_triangular
+
+from .data import CalibrationData, SourceData
+from .noise_waves import design_terms
+from .normal_equations import build_normal_equations
+from .polynomial_model import PolynomialParameters, design_rows
+from .radiometric_solver import linearise
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """Cramer-Rao standard deviation of a calibrated source, per channel and RMS (K)."""
+
+    freq_hz: FloatArray
+    std: FloatArray
+
+    @property
+    def rms(self) -> float:
+        """Root mean square of the per-channel floor over the band."""
+        return float(np.sqrt(np.mean(self.std**2)))
+
+
+def noise_floor(
+    data: CalibrationData,
+    source: SourceData,
+    parameters: PolynomialParameters,
+    gamma_rec: ComplexArray | None = None,
+) -> NoiseFloor:
+    """Floor of ``source`` calibrated from ``data``, for the model ``parameters``.
+
+    ``parameters`` supplies the orders and the point at which the information is
+    evaluated: the truth in a simulation, a solution's posterior mean otherwise.
+    ``source`` supplies its reflection and Q (use the noiseless Q when known);
+    ``gamma_rec`` defaults to the run's receiver reflection.
+    """
+    freq = data.freq_hz
+    orders = parameters.orders
+    basis = parameters.basis.matrix(freq, max(orders))
+    theta = parameters.evaluate(freq)
+    temps, q, var_q = data.stacked()
+    terms = data.terms()
+    noiseless_q = np.asarray(
+        (temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float
+    )
+    rows = linearise(terms, temps, noiseless_q, var_q, theta)
+    normal = build_normal_equations(
+        rows.features, rows.weights, rows.response, basis, orders,
+        reference=parameters.coefficients,
+    )
+    chol, _ = cho_factor(normal.gram, lower=True)
+    src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
+    src_rows = design_rows(src_terms.matrix(source.q), basis, orders)
+    z = solve_triangular(chol, src_rows.T, lower=True)
+    return NoiseFloor(freq, np.sqrt(np.sum(z**2, axis=0)))

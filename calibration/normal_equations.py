@@ -1,0 +1,152 @@
+"""Weighted normal equations of the polynomial calibration model, built once per solve.
+
+Both polynomial solvers fit a linear model ``y_if = sum_k F_ifk theta_k(f) + e_if`` over
+sources ``i`` and channels ``f``, with per-row weights ``w_if = 1 / var(e_if)`` and
+``theta_k(f) = sum_j c_kj B_j(f)``. Everything model selection needs is a handful of
+moments over the largest model (``max_orders``)::
+
+    G   = sum_if w_if x_if x_if^T           (Gram matrix, P x P)
+    g   = sum_if w_if x_if r_if             (r = y - X c_ref: residual of a reference fit)
+    chi = sum_if w_if r_if^2
+
+with ``x_if`` the design row (features times basis functions). They cost
+``O(n_sources n_channels n_max^2)`` to build and nothing thereafter: any sub-model is a
+sub-block of ``G``. Expressing the fit relative to ``c_ref`` keeps every quadratic form at
+the size of the noise, so the evidence does not lose digits to ``y^T W y``, which is
+``~1e10`` for kelvin-scale data with millikelvin noise (the cancellation the thesis
+warns of in its footnote to eq. 3.36). No ``n_channels x n_channels`` matrix is formed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .noise_waves import N_PARAMETERS
+from .polynomial_model import Orders, as_orders, coefficient_slices, full_indices
+
+FloatArray = NDArray[np.float64]
+
+
+def _project_pairs(
+    features: FloatArray, weights: FloatArray, basis: FloatArray, max_orders: Orders
+) -> FloatArray:
+    """``G = sum_if w x x^T`` assembled block by block from per-channel feature moments."""
+    slices = coefficient_slices(max_orders)
+    p = sum(max_orders)
+    gram = np.zeros((p, p))
+    wf = weights[..., None] * features  # (M, N, 5)
+    for a in range(N_PARAMETERS):
+        for b in range(a, N_PARAMETERS):
+            na, nb = max_orders[a], max_orders[b]
+            if na == 0 or nb == 0:
+                continue
+            c = np.einsum("mn,mn->n", wf[..., a], features[..., b])
+            block = basis[:, :na].T @ (c[:, None] * basis[:, :nb])
+            gram[slices[a], slices[b]] = block
+            gram[slices[b], slices[a]] = block.T
+    return gram
+
+
+def _project_vector(
+    features: FloatArray, weighted_residual: FloatArray, basis: FloatArray, max_orders: Orders
+) -> FloatArray:
+    """``sum_if x_if * (w r)_if`` for every coefficient."""
+    per_channel = np.einsum("mnk,mn->kn", features, weighted_residual)  # (5, N)
+    return np.concatenate(
+        [basis[:, :n].T @ per_channel[k] for k, n in enumerate(max_orders)]
+    )
+
+
+def evaluate_coefficients(
+    coefficients: FloatArray, basis: FloatArray, orders: Sequence[int]
+) -> FloatArray:
+    """Parameter curves ``(5, N)`` from a concatenated coefficient vector."""
+    return np.stack(
+        [basis[:, : s.stop - s.start] @ coefficients[s] for s in coefficient_slices(orders)]
+    )
+
+
+@dataclass(frozen=True)
+class NormalEquations:
+    """Moments of a weighted linear model about a reference fit (see module docstring).
+
+    Attributes
+    ----------
+    max_orders
+        Term counts of the largest model; every candidate model is a sub-block.
+    gram, cross, chi2_ref
+        ``G``, ``g`` and ``chi`` above.
+    reference
+        The reference coefficients ``c_ref`` (layout of ``max_orders``).
+    n_rows
+        Number of data rows ``N`` (sources x channels).
+    sum_log_weights
+        ``sum log w``: the whitening Jacobian in the evidence.
+    """
+
+    max_orders: Orders
+    gram: FloatArray
+    cross: FloatArray
+    chi2_ref: float
+    reference: FloatArray
+    n_rows: int
+    sum_log_weights: float
+
+    def indices(self, orders: Sequence[int]) -> NDArray[np.intp]:
+        """Positions of a sub-model's coefficients in the ``max_orders`` layout."""
+        orders = as_orders(orders)
+        if any(n > m for n, m in zip(orders, self.max_orders, strict=True)):
+            raise ValueError(f"orders {orders} exceed the built maximum {self.max_orders}")
+        return full_indices(orders, self.max_orders)
+
+    def rhs(self, idx: NDArray[np.intp]) -> FloatArray:
+        """``X^T W y`` restricted to ``idx`` (``y = X c_ref + r``)."""
+        return np.asarray(self.gram[idx] @ self.reference + self.cross[idx])
+
+    def chi2(self, coefficients: FloatArray, idx: NDArray[np.intp]) -> float:
+        """``(y - X c)^T W (y - X c)`` for a sub-model's coefficients, without cancellation."""
+        d = self.reference.copy()
+        d[idx] -= coefficients
+        return float(self.chi2_ref + 2.0 * d @ self.cross + d @ self.gram @ d)
+
+
+def build_normal_equations(
+    features: FloatArray,
+    weights: FloatArray,
+    response: FloatArray,
+    basis: FloatArray,
+    max_orders: Sequence[int],
+    reference: FloatArray | None = None,
+    ridge: FloatArray | None = None,
+) -> NormalEquations:
+    """Build :class:`NormalEquations` for ``features (M, N, 5)``, ``weights``/``response (M, N)``.
+
+    ``basis`` is ``(N, max(max_orders))``. Without ``reference`` the reference fit is the
+    largest model's weighted least squares, regularised by ``ridge`` (prior precisions,
+    one per coefficient) so that it exists even when the data leave directions free.
+    """
+    max_orders = as_orders(max_orders)
+    gram = _project_pairs(features, weights, basis, max_orders)
+    if reference is None:
+        rhs = _project_vector(features, weights * response, basis, max_orders)
+        ridge_diag = np.zeros(len(rhs)) if ridge is None else np.asarray(ridge, dtype=float)
+        scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
+        a = gram / np.outer(scale, scale) + np.diag(ridge_diag / scale**2 + 1e-12)
+        reference = np.linalg.solve(a, rhs / scale) / scale
+    residual = response - np.einsum(
+        "mnk,kn->mn", features, evaluate_coefficients(reference, basis, max_orders)
+    )
+    wr = weights * residual
+    return NormalEquations(
+        max_orders=max_orders,
+        gram=gram,
+        cross=_project_vector(features, wr, basis, max_orders),
+        chi2_ref=float(np.sum(wr * residual)),
+        reference=np.asarray(reference, dtype=float),
+        n_rows=int(weights.size),
+        sum_log_weights=float(np.sum(np.log(weights))),
+    )

@@ -1,0 +1,146 @@
+"""The radiometric solver: the likelihood of what the receiver actually measured.
+
+The measured quantity is ``Q`` (eq. 3.9), built from three spectra whose noise the
+radiometer equation gives, ``sigma_P = P / sqrt(B tau)``. Its variance ``var(Q_if)``
+differs per calibrator ``i`` and channel ``f`` (:func:`calibration.noise_waves.q_variance`).
+Eq. 3.27 solved for Q is the model::
+
+    Q_if(Theta) = (T_i - X_unc T_unc - X_cos T_cos - X_sin T_sin - X_L T_L) / (X_L T_NS)
+    Q_if(measured) ~ N(Q_if(Theta), s^2 var(Q_if))
+
+It is linear in every parameter but ``T_NS``. One Gauss-Newton step about a current
+estimate ``Theta_0`` (with ``Q_0 = Q(Theta_0)``) is exactly a weighted linear regression
+in the thesis's own variables::
+
+    y_if = T_i - X_L T_NS0 (Q_if - Q0_if)                 (temperature, noise moved out of X)
+    x_if = (X_unc, X_cos, X_sin, Q0_if X_L, X_L)          (design: eq. 3.28 with the *model* Q)
+    w_if = 1 / (X_L T_NS0)^2 var(Q_if)                    (radiometer weights)
+
+so the thesis's conjugate machinery (eqs. 3.34-3.36, :mod:`calibration.conjugate`) applies
+unchanged to whitened rows. Because ``x`` holds the noiseless ``Q_0``, there is no
+errors-in-variables bias, and because ``w`` follows the radiometer equation, the estimate
+is efficient: its error reaches the Cramer-Rao floor (:mod:`calibration.noise_floor`).
+``T_NS`` is known to ~1e-5 after the first step, so two or three iterations converge.
+
+``s^2`` either has an inverse-gamma prior with mode 1 (default: the radiometer equation
+is trusted but can be found wrong, which inflates the error bars) or is fixed at 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .basis import BasisKind, PolynomialBasis
+from .conjugate import CoefficientPrior, ScalePrior
+from .data import CalibrationData
+from .errors import IllPosedError
+from .model_fit import OrderChoice, fit
+from .noise_waves import INDEX, DesignTerms, model_q
+from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
+from .polynomial_model import Orders
+from .solution import Solution
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RadiometricPrior:
+    """Priors of the radiometric solver: coefficients (K) and the noise scale ``s^2``.
+
+    ``scale=None`` fixes ``s^2 = 1`` (Gaussian posterior); the default ``IG(1, 2)`` has its
+    mode at 1.
+    """
+
+    coefficients: CoefficientPrior = field(default_factory=CoefficientPrior)
+    scale: ScalePrior | None = field(default_factory=lambda: ScalePrior(1.0, 2.0))
+
+
+@dataclass(frozen=True)
+class LinearisedProblem:
+    """Rows of the Gauss-Newton regression about a parameter estimate (module docstring)."""
+
+    features: FloatArray
+    weights: FloatArray
+    response: FloatArray
+
+
+def linearise(
+    terms: DesignTerms, temps: FloatArray, q: FloatArray, var_q: FloatArray, theta0: FloatArray
+) -> LinearisedProblem:
+    """Gauss-Newton rows about ``theta0`` (``(5, n_channels)`` parameter curves)."""
+    t_ns0 = theta0[INDEX["NS"]]
+    if np.any(t_ns0 <= 0):
+        raise IllPosedError(
+            "the noise-source temperature came out <= 0 K: the calibrators do not constrain "
+            "T_NS (check the noise-source spectra and the calibrator temperatures)"
+        )
+    q0 = model_q(theta0, terms, temps)
+    gain = terms.x_l * t_ns0
+    return LinearisedProblem(
+        features=terms.matrix(q0),
+        weights=1.0 / (gain**2 * var_q),
+        response=temps - gain * (q - q0),
+    )
+
+
+def _normal_equations(
+    problem: LinearisedProblem, basis: FloatArray, orders: Orders, ridge: FloatArray
+) -> NormalEquations:
+    return build_normal_equations(
+        problem.features, problem.weights, problem.response, basis, orders, ridge=ridge
+    )
+
+
+def solve_radiometric(
+    data: CalibrationData,
+    orders: OrderChoice | None = None,
+    prior: RadiometricPrior | None = None,
+    basis_kind: BasisKind = "legendre",
+    iterations: int = 2,
+) -> Solution:
+    """Noise-wave parameters from the radiometer-noise likelihood of Q.
+
+    ``orders=None`` chooses the orders by evidence. ``iterations`` Gauss-Newton steps are
+    taken at the largest model before the search and again for the chosen model.
+    """
+    choice = orders or OrderChoice()
+    prior = prior or RadiometricPrior()
+    basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
+    largest = choice.largest
+    b = basis.matrix(data.freq_hz, max(largest))
+    terms = data.terms()
+    temps, q, var_q = data.stacked()
+
+    def ridge(orders: Orders) -> FloatArray:
+        return 1.0 / prior.coefficients.vectors(orders)[1]
+
+    # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
+    start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
+    normal = _normal_equations(start, b, largest, ridge(largest))
+    for _ in range(iterations):
+        theta = evaluate_coefficients(normal.reference, b, largest)
+        normal = _normal_equations(linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest))
+    posterior, table = fit(normal, choice, prior.coefficients, 1.0, prior.scale)
+    if posterior.orders != largest:
+        chosen = posterior.orders
+        b_chosen = b[:, : max(chosen)]
+        mean = posterior.mean
+        for _ in range(iterations):
+            theta = evaluate_coefficients(mean, b_chosen, chosen)
+            refined = _normal_equations(
+                linearise(terms, temps, q, var_q, theta), b_chosen, chosen, ridge(chosen)
+            )
+            mean = refined.reference
+        posterior, _ = fit(refined, OrderChoice.fixed(chosen), prior.coefficients, 1.0, prior.scale)
+        table[chosen] = posterior.log_evidence
+    return Solution(
+        method="radiometric",
+        basis=basis,
+        posterior=posterior,
+        measurement_model="radiometer",
+        evidence_table=table,
+        calibrators=tuple(data.names),
+    )

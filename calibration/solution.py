@@ -1,0 +1,181 @@
+"""A calibration solution: noise-wave polynomials with their posterior, applied to sources.
+
+Calibrating a source inverts nothing: eq. 3.27 gives its temperature directly from its
+measured ``Q``, reflection coefficient and the parameters,
+``T_src(f) = x_src(f)^T c`` with ``x_src`` the source's design row (eqs. 3.22-3.26, 3.40).
+The predictive distribution of ``T_src`` (eq. 3.41) has two independent parts:
+
+* the calibration error ``x^T Cov(c) x``, correlated across channels, shared by every
+  source calibrated with this solution (Student-t with the posterior's dof, eq. 3.42);
+* the source's own measurement noise: for the radiometric solver
+  ``(X_L T_NS)^2 s^2 var(Q_src)`` per channel from the radiometer equation; for the thesis
+  solver its homoscedastic ``sigma^2 = b*/a*`` (eq. 4.3).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from .basis import PolynomialBasis
+from .conjugate import LinearPosterior
+from .data import SourceData, check_source
+from .errors import InvalidDataError
+from .noise_waves import INDEX, PARAMETERS, design_terms
+from .polynomial_model import Orders, PolynomialParameters, coefficient_slices, design_rows
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+MeasurementModel = Literal["radiometer", "homoscedastic"]
+
+
+@dataclass(frozen=True)
+class CalibratedSpectrum:
+    """Calibrated temperature of a source with its predictive uncertainty (K).
+
+    ``std_calibration`` is the solution's error (correlated across channels);
+    ``std_measurement`` the source's own noise (independent per channel).
+    """
+
+    freq_hz: FloatArray
+    mean: FloatArray
+    std_calibration: FloatArray
+    std_measurement: FloatArray
+    dof: float
+    rows: FloatArray = field(repr=False)
+    posterior: LinearPosterior = field(repr=False)
+
+    @property
+    def std(self) -> FloatArray:
+        """Total predictive standard deviation per channel."""
+        return np.sqrt(self.std_calibration**2 + self.std_measurement**2)
+
+    def interval(self, level: float = 0.68, calibration_only: bool = False) -> tuple[FloatArray, FloatArray]:
+        """Central credible interval at ``level`` per channel."""
+        q = 0.5 + 0.5 * level
+        z = stats.norm.ppf(q) if np.isinf(self.dof) else stats.t.ppf(q, self.dof)
+        std = self.std_calibration if calibration_only else self.std
+        return self.mean - z * std, self.mean + z * std
+
+    def samples(self, n: int, rng: np.random.Generator, calibration_only: bool = False) -> FloatArray:
+        """``n`` draws of the calibrated spectrum, shape ``(n, n_channels)``."""
+        draws = self.posterior.sample(n, rng) @ self.rows.T
+        if not calibration_only:
+            draws = draws + rng.standard_normal(draws.shape) * self.std_measurement
+        return np.asarray(draws)
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Noise-wave parameters as polynomials with their posterior.
+
+    Attributes
+    ----------
+    method
+        ``"radiometric"`` (the default solver) or ``"thesis"`` (EXCALIBRATE).
+    basis
+        The polynomial basis the coefficients refer to.
+    posterior
+        Posterior of the concatenated coefficients (orders in ``posterior.orders``).
+    measurement_model
+        How a calibrated source's own noise is predicted (module docstring).
+    evidence_table
+        Log evidence of every model the order search evaluated.
+    calibrators
+        Names of the calibrators used.
+    """
+
+    method: str
+    basis: PolynomialBasis
+    posterior: LinearPosterior
+    measurement_model: MeasurementModel
+    evidence_table: Mapping[Orders, float] = field(default_factory=dict)
+    calibrators: tuple[str, ...] = ()
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def orders(self) -> Orders:
+        """Number of polynomial terms of each parameter."""
+        return self.posterior.orders
+
+    @property
+    def parameters(self) -> PolynomialParameters:
+        """Posterior-mean coefficients as evaluable polynomials."""
+        return PolynomialParameters(self.basis, self.orders, self.posterior.mean)
+
+    def evaluate(self, freq_hz: FloatArray) -> FloatArray:
+        """Posterior-mean parameters ``(5, n_channels)`` in K."""
+        return self.parameters.evaluate(freq_hz)
+
+    def parameter_std(self, freq_hz: FloatArray) -> FloatArray:
+        """Posterior standard deviation of each parameter ``(5, n_channels)``."""
+        b = self.basis.matrix(np.asarray(freq_hz, dtype=float), max(self.orders))
+        cov = self.posterior.covariance
+        out = []
+        for s in coefficient_slices(self.orders):
+            bs = b[:, : s.stop - s.start]
+            out.append(np.sqrt(np.einsum("nj,jk,nk->n", bs, cov[s, s], bs)))
+        return np.stack(out)
+
+    def sample_parameters(self, freq_hz: FloatArray, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` posterior draws of the parameters, ``(n, 5, n_channels)``."""
+        draws = self.posterior.sample(n, rng)
+        return PolynomialParameters(self.basis, self.orders, draws).evaluate(freq_hz)
+
+    def design_rows(self, freq_hz: FloatArray, gamma_rec: ComplexArray, gamma: ComplexArray, q: FloatArray) -> FloatArray:
+        """Design rows ``(n_channels, P)`` of a source: ``T_src = rows @ c``."""
+        terms = design_terms(gamma, gamma_rec)
+        basis = self.basis.matrix(np.asarray(freq_hz, dtype=float), max(self.orders))
+        return design_rows(terms.matrix(q), basis, self.orders)
+
+    def calibrate(
+        self,
+        freq_hz: FloatArray,
+        gamma_rec: ComplexArray,
+        source: SourceData,
+        channel_width_hz: float | None = None,
+    ) -> CalibratedSpectrum:
+        """Calibrate ``source`` (eq. 3.27) with its predictive uncertainty.
+
+        ``channel_width_hz`` is needed for the radiometer measurement noise; without it
+        only the calibration error is reported for the radiometric solver.
+        """
+        freq = np.asarray(freq_hz, dtype=float)
+        source = check_source(source, freq.size)
+        gamma_rec = np.asarray(gamma_rec, dtype=complex)
+        if gamma_rec.shape != freq.shape:
+            raise InvalidDataError("receiver reflection does not match the frequencies", source.name)
+        rows = self.design_rows(freq, gamma_rec, source.gamma, source.q)
+        post = self.posterior
+        mean = rows @ post.mean
+        std_cal = np.sqrt(np.einsum("np,pq,nq->n", rows, post.covariance, rows))
+        if self.measurement_model == "homoscedastic":
+            std_meas = np.full(freq.shape, np.sqrt(post.noise_variance))
+        elif channel_width_hz is None:
+            std_meas = np.zeros(freq.shape)
+        else:
+            terms = design_terms(source.gamma, gamma_rec)
+            t_ns = self.evaluate(freq)[INDEX["NS"]]
+            var_q = source.q_variance(channel_width_hz)
+            std_meas = np.abs(terms.x_l * t_ns) * np.sqrt(post.noise_variance * var_q)
+        return CalibratedSpectrum(freq, mean, std_cal, std_meas, post.dof, rows, post)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain-data summary: orders, evidence, noise scale, coefficients."""
+        post = self.posterior
+        return {
+            "method": self.method,
+            "basis": self.basis.kind,
+            "band_hz": [self.basis.f_lo_hz, self.basis.f_hi_hz],
+            "orders": dict(zip(PARAMETERS, self.orders, strict=True)),
+            "log_evidence": post.log_evidence,
+            "noise_variance": post.noise_variance,
+            "chi2_per_row": post.chi2 / post.n_rows,
+            "calibrators": list(self.calibrators),
+            "models_evaluated": len(self.evidence_table),
+        }

@@ -1,0 +1,87 @@
+"""The thesis's solver (EXCALIBRATE, thesis chapter 3), kept faithfully as the baseline.
+
+Likelihood (eq. 3.33): the calibrator temperatures are the data,
+``T_cal = X Theta + sigma`` with ``X = (X_unc, X_cos, X_sin, X_NS, X_L)`` (eq. 3.28),
+``X_NS = Q X_L`` built from the *measured* Q, and one homoscedastic noise variance
+``sigma^2`` for every row. Prior: normal-inverse-gamma (eq. 3.34) with the thesis defaults
+of section 4.4::
+
+    a = 1                                                      (eq. 4.1)
+    b = (a + 1) sigma_p^2,  sigma_p = 1 K                      (eq. 4.2, in kelvin)
+
+so that the prior mode of ``sigma^2`` is ``sigma_p^2``. Evidence eq. 3.35, posterior
+eq. 3.38, predictive eq. 3.42, error term ``Sigma* = (b*/a*) V*`` (eq. 4.3).
+
+Known shortcomings, kept on purpose because this is the published method: the noise is
+really in Q (so the regressor ``X_NS`` is noisy: errors-in-variables), its variance differs
+by calibrator and channel, and one ``sigma`` cannot describe it. See
+:mod:`calibration.radiometric_solver` for the solver that fixes this.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .basis import BasisKind, PolynomialBasis
+from .conjugate import CoefficientPrior, ScalePrior
+from .data import CalibrationData
+from .model_fit import OrderChoice, fit
+from .normal_equations import build_normal_equations
+from .solution import Solution
+
+
+@dataclass(frozen=True)
+class ThesisPrior:
+    """The thesis's prior: ``a`` (eq. 4.1), expected noise ``sigma_p`` (eq. 4.2), coefficients."""
+
+    a: float = 1.0
+    sigma_p_k: float = 1.0
+    coefficients: CoefficientPrior = field(default_factory=CoefficientPrior)
+
+    @property
+    def scale_prior(self) -> ScalePrior:
+        """``IG(a, b)`` with ``b = (a + 1) sigma_p^2`` (eq. 4.2)."""
+        return ScalePrior(self.a, (self.a + 1.0) * self.sigma_p_k**2)
+
+
+def solve_thesis(
+    data: CalibrationData,
+    orders: OrderChoice | None = None,
+    prior: ThesisPrior | None = None,
+    basis_kind: BasisKind = "legendre",
+) -> Solution:
+    """Noise-wave parameters by the thesis's conjugate-prior method.
+
+    ``orders=None`` chooses the orders by evidence (section 4.2.3, with the search of
+    :mod:`calibration.order_search`). ``basis_kind="power"`` uses the thesis's
+    ``(nu/nu_0)^k`` (eq. 3.40); the default Legendre basis spans the same space.
+    """
+    choice = orders or OrderChoice()
+    prior = prior or ThesisPrior()
+    basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
+    temps, q, _ = data.stacked()
+    features = data.terms().matrix(q)
+    weights = np.ones_like(temps)
+    mean0, var0 = prior.coefficients.vectors(choice.largest)
+    normal = build_normal_equations(
+        features,
+        weights,
+        temps,
+        basis.matrix(data.freq_hz, max(choice.largest)),
+        choice.largest,
+        ridge=prior.sigma_p_k**2 / var0,
+    )
+    posterior, table = fit(
+        normal, choice, prior.coefficients, prior.sigma_p_k**2, prior.scale_prior
+    )
+    return Solution(
+        method="thesis",
+        basis=basis,
+        posterior=posterior,
+        measurement_model="homoscedastic",
+        evidence_table=table,
+        calibrators=tuple(data.names),
+        metadata={"sigma_k": float(np.sqrt(posterior.noise_variance))},
+    )
