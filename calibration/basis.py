@@ -66,4 +66,4 @@ class PolynomialBasis:
         x = self.normalised(freq_hz)
         if self.kind == "power":
             return x[:, None] ** np.arange(n_terms)
-        return np.polynomial.legendre.legvander(x, max(n_terms - 1, 0))[:, :n_terms]
+        return np.asarray(np.polynomial.legendre.legvander(x, max(n_terms - 1, 0))[:, :n_terms])

@@ -163,11 +163,15 @@ def solve(
     a, b = scale_prior.a, scale_prior.b
     a_star = a + 0.5 * normal.n_rows
     b_star = b + 0.5 * q_min
-    log_z = (
-        base + a * np.log(b) - a_star * np.log(b_star) + gammaln(a_star) - gammaln(a) + occam
-    )
+    log_z = base + a * np.log(b) - a_star * np.log(b_star) + gammaln(a_star) - gammaln(a) + occam
     noise_variance = b_star / a_star
     return LinearPosterior(
-        orders, mean, noise_variance * inverse, 2.0 * a_star, float(log_z), noise_variance,
-        chi2, normal.n_rows,
+        orders,
+        mean,
+        noise_variance * inverse,
+        2.0 * a_star,
+        float(log_z),
+        noise_variance,
+        chi2,
+        normal.n_rows,
     )

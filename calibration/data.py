@@ -26,7 +26,7 @@ ComplexArray = NDArray[np.complex128]
 def _channel_array(
     value: ArrayLike, n_channels: int, what: str, source: str | None, dtype: type = float
 ) -> NDArray[Any]:
-    arr = np.asarray(value, dtype=dtype)
+    arr: NDArray[Any] = np.asarray(value, dtype=dtype)
     if arr.ndim == 0:
         arr = np.full(n_channels, arr, dtype=dtype)
     if arr.shape != (n_channels,):

@@ -40,17 +40,37 @@ class OrderChoice:
         return self.orders if self.orders is not None else self.max_orders
 
 
+def check_constrained(normal: NormalEquations, orders: Orders, rcond: float = 1e-13) -> None:
+    """Raise :class:`IllPosedError` if the data alone leave a direction of ``orders`` free.
+
+    The prior would still give a posterior, but it would be the prior's answer, not the
+    data's: too few calibrators (or too little reflection variety) for these orders.
+    """
+    idx = normal.indices(orders)
+    gram = normal.gram[np.ix_(idx, idx)]
+    scale = np.sqrt(np.maximum(np.diag(gram), np.finfo(float).tiny))
+    eig = np.linalg.eigvalsh(gram / np.outer(scale, scale))
+    if eig[0] <= rcond * eig[-1]:
+        raise IllPosedError(
+            f"the calibrators do not constrain a model with orders {orders} "
+            f"(Gram eigenvalue ratio {eig[0] / eig[-1]:.1e}): "
+            "add calibrators or lower the orders"
+        )
+
+
 def fit(
     normal: NormalEquations,
     choice: OrderChoice,
     prior: CoefficientPrior,
     prior_variance_scale: float,
     scale_prior: ScalePrior | None,
+    allow_prior_dominated: bool = False,
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """Posterior of the chosen (or evidence-best) model and the evidence table.
 
     ``prior_variance_scale`` divides the kelvin prior variances into ``V_0`` units (the
-    NIG prior's coefficient covariance is ``s^2 V_0``).
+    NIG prior's coefficient covariance is ``s^2 V_0``). Fixed orders that the data leave
+    unconstrained raise :class:`IllPosedError` unless ``allow_prior_dominated``.
     """
 
     def posterior(orders: Orders) -> LinearPosterior:
@@ -58,6 +78,8 @@ def fit(
         return solve(normal, orders, mean, var / prior_variance_scale, scale_prior)
 
     if choice.orders is not None:
+        if not allow_prior_dominated:
+            check_constrained(normal, choice.orders)
         post = posterior(choice.orders)
         return post, {choice.orders: post.log_evidence}
 

@@ -63,14 +63,16 @@ def noise_floor(
     orders = parameters.orders
     basis = parameters.basis.matrix(freq, max(orders))
     theta = parameters.evaluate(freq)
-    temps, q, var_q = data.stacked()
+    temps, _, var_q = data.stacked()
     terms = data.terms()
-    noiseless_q = np.asarray(
-        (temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float
-    )
+    noiseless_q = np.asarray((temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float)
     rows = linearise(terms, temps, noiseless_q, var_q, theta)
     normal = build_normal_equations(
-        rows.features, rows.weights, rows.response, basis, orders,
+        rows.features,
+        rows.weights,
+        rows.response,
+        basis,
+        orders,
         reference=parameters.coefficients,
     )
     chol, _ = cho_factor(normal.gram, lower=True)

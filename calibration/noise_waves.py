@@ -56,7 +56,9 @@ class DesignTerms:
     def offset(self, theta: FloatArray) -> FloatArray:
         """``X_unc T_unc + X_cos T_cos + X_sin T_sin + X_L T_L``: everything but the Q term."""
         return (
-            self.x_unc * theta[0] + self.x_cos * theta[1] + self.x_sin * theta[2]
+            self.x_unc * theta[0]
+            + self.x_cos * theta[1]
+            + self.x_sin * theta[2]
             + self.x_l * theta[4]
         )
 

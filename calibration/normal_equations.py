@@ -56,9 +56,7 @@ def _project_vector(
 ) -> FloatArray:
     """``sum_if x_if * (w r)_if`` for every coefficient."""
     per_channel = np.einsum("mnk,mn->kn", features, weighted_residual)  # (5, N)
-    return np.concatenate(
-        [basis[:, :n].T @ per_channel[k] for k, n in enumerate(max_orders)]
-    )
+    return np.concatenate([basis[:, :n].T @ per_channel[k] for k, n in enumerate(max_orders)])
 
 
 def evaluate_coefficients(

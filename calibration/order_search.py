@@ -38,7 +38,7 @@ def _neighbours(
             n = orders[k] + step
             if step == 0 or not lo[k] <= n <= hi[k]:
                 continue
-            yield orders[:k] + (n,) + orders[k + 1 :]  # type: ignore[misc]
+            yield (*orders[:k], n, *orders[k + 1 :])  # type: ignore[misc]
 
 
 def search_orders(

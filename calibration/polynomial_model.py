@@ -11,6 +11,7 @@ with the basis functions (eq. 3.40)::
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -37,7 +38,7 @@ def as_orders(orders: Sequence[int]) -> Orders:
 def coefficient_slices(orders: Sequence[int]) -> list[slice]:
     """Slice of each parameter's coefficients in the concatenated vector."""
     edges = np.concatenate([[0], np.cumsum(orders)])
-    return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)]
 
 
 def full_indices(orders: Sequence[int], max_orders: Sequence[int]) -> NDArray[np.intp]:
@@ -56,9 +57,7 @@ def design_rows(
     Returns ``(..., n_ch, sum(orders))``. Only used for small problems and for applying a
     solution to one source; the solvers never form the full matrix for all calibrators.
     """
-    blocks = [
-        features[..., k : k + 1] * basis_matrix[:, :n] for k, n in enumerate(orders)
-    ]
+    blocks = [features[..., k : k + 1] * basis_matrix[:, :n] for k, n in enumerate(orders)]
     return np.concatenate(blocks, axis=-1)
 
 
@@ -75,7 +74,8 @@ class PolynomialParameters:
         coeffs = np.asarray(self.coefficients, dtype=float)
         if coeffs.shape[-1] != sum(self.orders):
             raise ValueError(
-                f"{coeffs.shape[-1]} coefficients for orders {self.orders} (need {sum(self.orders)})"
+                f"{coeffs.shape[-1]} coefficients for orders {self.orders} "
+                f"(need {sum(self.orders)})"
             )
         object.__setattr__(self, "coefficients", coeffs)
 

@@ -108,6 +108,11 @@ def solve_radiometric(
     """
     choice = orders or OrderChoice()
     prior = prior or RadiometricPrior()
+    if len(data.sources) < 2:
+        raise IllPosedError(
+            f"one calibrator ({data.names[0]!r}) cannot separate T_NS from T_L: "
+            "at least two are needed (e.g. ambient and hot loads)"
+        )
     basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
     largest = choice.largest
     b = basis.matrix(data.freq_hz, max(largest))
@@ -122,7 +127,9 @@ def solve_radiometric(
     normal = _normal_equations(start, b, largest, ridge(largest))
     for _ in range(iterations):
         theta = evaluate_coefficients(normal.reference, b, largest)
-        normal = _normal_equations(linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest))
+        normal = _normal_equations(
+            linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest)
+        )
     posterior, table = fit(normal, choice, prior.coefficients, 1.0, prior.scale)
     if posterior.orders != largest:
         chosen = posterior.orders

@@ -45,7 +45,7 @@ class Cable:
 def impedance_reflection(z_ohm: complex | ComplexArray) -> ComplexArray:
     """``Gamma = (Z - Z_0) / (Z + Z_0)``."""
     z = np.asarray(z_ohm, dtype=complex)
-    return (z - Z0_OHM) / (z + Z0_OHM)
+    return np.asarray((z - Z0_OHM) / (z + Z0_OHM), dtype=complex)
 
 
 def terminated_cable(
@@ -59,7 +59,7 @@ def resistor(freq_hz: FloatArray, r_ohm: float, lead_inductance_h: float = 0.4e-
     """A resistor with a little series lead inductance (open: ``inf``, short: ``0``)."""
     f = np.asarray(freq_hz, dtype=float)
     if np.isinf(r_ohm):
-        return np.ones_like(f, dtype=complex)
+        return np.ones(f.shape, dtype=complex)
     return impedance_reflection(r_ohm + 2j * np.pi * f * lead_inductance_h)
 
 
@@ -99,11 +99,13 @@ def mock_antenna(freq_hz: FloatArray, f0_hz: float = 90e6) -> ComplexArray:
     About -21 dB at resonance, -10 dB at the band edges: like the thesis's lab mock antenna.
     """
     f = np.asarray(freq_hz, dtype=float)
-    z = 60.0 + 30j * (f / f0_hz - f0_hz / f)
+    z = np.asarray(60.0 + 30j * (f / f0_hz - f0_hz / f), dtype=complex)
     return terminated_cable(f, impedance_reflection(z), Cable(length_m=0.5))
 
 
-def lna_reflection(freq_hz: FloatArray, f_lo_hz: float = 50e6, f_hi_hz: float = 130e6) -> ComplexArray:
+def lna_reflection(
+    freq_hz: FloatArray, f_lo_hz: float = 50e6, f_hi_hz: float = 130e6
+) -> ComplexArray:
     """A realistic LNA input reflection, about -30 dB with a slow phase wrap."""
     f = np.asarray(freq_hz, dtype=float)
     x = (2 * f - f_lo_hz - f_hi_hz) / (f_hi_hz - f_lo_hz)

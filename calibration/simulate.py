@@ -16,13 +16,13 @@ The default band and channels are the REACH ones: 50-130 MHz at 400 MSPS / 32768
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .basis import PolynomialBasis
+from .basis import BasisKind, PolynomialBasis
 from .data import CalibrationData, Integration, SourceData
 from .noise_waves import dicke_powers
 from .polynomial_model import PolynomialParameters
@@ -36,14 +36,36 @@ ITPM_CHANNEL_WIDTH_HZ = 400e6 / 32768
 
 #: The twelve REACH calibrators (thesis table A.2), REACH names.
 REACH_CALIBRATORS: tuple[str, ...] = (
-    "cold", "hot", "r25", "r100", "c2r27", "c2r36", "c2r69", "c2r91",
-    "c10open", "c10short", "c10r10", "c10r250",
+    "cold",
+    "hot",
+    "r25",
+    "r100",
+    "c2r27",
+    "c2r36",
+    "c2r69",
+    "c2r91",
+    "c10open",
+    "c10short",
+    "c10r10",
+    "c10r250",
 )
 
 #: Noise-diode excess noise ratio, Noisecom NC346A (thesis table 2.1), MHz -> dB.
 NC346A_ENR_DB = {
-    30: 6.05, 40: 6.03, 50: 6.00, 60: 5.94, 70: 5.91, 80: 5.87, 90: 5.84, 100: 5.79,
-    110: 5.80, 120: 5.77, 130: 5.80, 140: 5.81, 150: 5.83, 200: 5.88,
+    30: 6.05,
+    40: 6.03,
+    50: 6.00,
+    60: 5.94,
+    70: 5.91,
+    80: 5.87,
+    90: 5.84,
+    100: 5.79,
+    110: 5.80,
+    120: 5.77,
+    130: 5.80,
+    140: 5.81,
+    150: 5.83,
+    200: 5.88,
 }
 
 
@@ -86,7 +108,7 @@ class ReceiverTruth:
 
     @classmethod
     def from_coefficients(
-        cls, basis: PolynomialBasis, coefficients: dict[str, Sequence[float]]
+        cls, basis: PolynomialBasis, coefficients: Mapping[str, Sequence[float]]
     ) -> ReceiverTruth:
         """Truth from per-parameter coefficient lists (keys: unc, cos, sin, NS, L)."""
         from .noise_waves import PARAMETERS
@@ -102,12 +124,12 @@ class ReceiverTruth:
     def gain(self, freq_hz: FloatArray) -> FloatArray:
         """System gain ``g`` (arbitrary power units per K)."""
         x = self.parameters.basis.normalised(freq_hz)
-        return np.asarray(np.polynomial.legendre.legval(x, self.gain_coefficients))
+        return np.asarray(np.polynomial.legendre.legval(x, self.gain_coefficients), float)
 
     def offset_k(self, freq_hz: FloatArray) -> FloatArray:
         """Receiver offset ``T_0`` (K)."""
         x = self.parameters.basis.normalised(freq_hz)
-        return np.asarray(np.polynomial.legendre.legval(x, self.offset_coefficients_k))
+        return np.asarray(np.polynomial.legendre.legval(x, self.offset_coefficients_k), float)
 
 
 @dataclass(frozen=True)
@@ -124,15 +146,16 @@ class SimulationConfig:
     vna_sigma: float = 0.0
     radiometer_noise: bool = True
     truth_coefficients: dict[str, list[float]] | None = field(default=None, hash=False)
+    truth_basis: BasisKind = "legendre"
 
     def frequencies(self) -> FloatArray:
         """Channel centres covering the band at the channel width."""
         n = int(np.floor((self.f_hi_hz - self.f_lo_hz) / self.channel_width_hz)) + 1
-        return self.f_lo_hz + self.channel_width_hz * np.arange(n)
+        return np.asarray(self.f_lo_hz + self.channel_width_hz * np.arange(n), dtype=float)
 
     def basis(self) -> PolynomialBasis:
-        """The Legendre basis on the simulated band."""
-        return PolynomialBasis("legendre", self.f_lo_hz, self.f_hi_hz)
+        """The basis of the truth coefficients on the simulated band."""
+        return PolynomialBasis(self.truth_basis, self.f_lo_hz, self.f_hi_hz)
 
     def truth(self) -> ReceiverTruth:
         """The receiver to simulate."""
@@ -161,7 +184,11 @@ def simulate_source(
     """One source's Dicke cycle: powers with radiometer noise (``rng=None``: noiseless)."""
     theta = truth.theta(freq_hz)
     powers = dicke_powers(
-        theta, gamma_true, gamma_rec_true, temperature_k, truth.gain(freq_hz),
+        theta,
+        gamma_true,
+        gamma_rec_true,
+        temperature_k,
+        truth.gain(freq_hz),
         truth.offset_k(freq_hz),
     )
     seconds = (integration.source_s, integration.load_s, integration.ns_s)
@@ -226,9 +253,17 @@ def simulate_run(
 
     def make(name: str, source_rng: np.random.Generator | None, known: bool) -> SourceData:
         return simulate_source(
-            name, freq, reach_source_reflection(name, freq), gamma_rec_true,
-            config.temperature_k(name), truth, integration, config.channel_width_hz,
-            source_rng, config.vna_sigma if rng is not None else 0.0, known,
+            name,
+            freq,
+            reach_source_reflection(name, freq),
+            gamma_rec_true,
+            config.temperature_k(name),
+            truth,
+            integration,
+            config.channel_width_hz,
+            source_rng,
+            config.vna_sigma if rng is not None else 0.0,
+            known,
         )
 
     sources = {name: make(name, noise_rng, True) for name in config.calibrators}
@@ -246,8 +281,17 @@ def simulate_run(
         config=config,
         validation=make(validation, noise_rng, False),
         validation_noiseless=simulate_source(
-            validation, freq, reach_source_reflection(validation, freq), gamma_rec_true,
-            t_val, truth, integration, config.channel_width_hz, None, 0.0, False,
+            validation,
+            freq,
+            reach_source_reflection(validation, freq),
+            gamma_rec_true,
+            t_val,
+            truth,
+            integration,
+            config.channel_width_hz,
+            None,
+            0.0,
+            False,
         ),
         validation_temperature_k=t_val,
         gamma_rec_true=gamma_rec_true,

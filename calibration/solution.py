@@ -55,14 +55,18 @@ class CalibratedSpectrum:
         """Total predictive standard deviation per channel."""
         return np.sqrt(self.std_calibration**2 + self.std_measurement**2)
 
-    def interval(self, level: float = 0.68, calibration_only: bool = False) -> tuple[FloatArray, FloatArray]:
+    def interval(
+        self, level: float = 0.68, calibration_only: bool = False
+    ) -> tuple[FloatArray, FloatArray]:
         """Central credible interval at ``level`` per channel."""
         q = 0.5 + 0.5 * level
         z = stats.norm.ppf(q) if np.isinf(self.dof) else stats.t.ppf(q, self.dof)
         std = self.std_calibration if calibration_only else self.std
         return self.mean - z * std, self.mean + z * std
 
-    def samples(self, n: int, rng: np.random.Generator, calibration_only: bool = False) -> FloatArray:
+    def samples(
+        self, n: int, rng: np.random.Generator, calibration_only: bool = False
+    ) -> FloatArray:
         """``n`` draws of the calibrated spectrum, shape ``(n, n_channels)``."""
         draws = self.posterior.sample(n, rng) @ self.rows.T
         if not calibration_only:
@@ -122,12 +126,16 @@ class Solution:
             out.append(np.sqrt(np.einsum("nj,jk,nk->n", bs, cov[s, s], bs)))
         return np.stack(out)
 
-    def sample_parameters(self, freq_hz: FloatArray, n: int, rng: np.random.Generator) -> FloatArray:
+    def sample_parameters(
+        self, freq_hz: FloatArray, n: int, rng: np.random.Generator
+    ) -> FloatArray:
         """``n`` posterior draws of the parameters, ``(n, 5, n_channels)``."""
         draws = self.posterior.sample(n, rng)
         return PolynomialParameters(self.basis, self.orders, draws).evaluate(freq_hz)
 
-    def design_rows(self, freq_hz: FloatArray, gamma_rec: ComplexArray, gamma: ComplexArray, q: FloatArray) -> FloatArray:
+    def design_rows(
+        self, freq_hz: FloatArray, gamma_rec: ComplexArray, gamma: ComplexArray, q: FloatArray
+    ) -> FloatArray:
         """Design rows ``(n_channels, P)`` of a source: ``T_src = rows @ c``."""
         terms = design_terms(gamma, gamma_rec)
         basis = self.basis.matrix(np.asarray(freq_hz, dtype=float), max(self.orders))
@@ -149,7 +157,9 @@ class Solution:
         source = check_source(source, freq.size)
         gamma_rec = np.asarray(gamma_rec, dtype=complex)
         if gamma_rec.shape != freq.shape:
-            raise InvalidDataError("receiver reflection does not match the frequencies", source.name)
+            raise InvalidDataError(
+                "receiver reflection does not match the frequencies", source.name
+            )
         rows = self.design_rows(freq, gamma_rec, source.gamma, source.q)
         post = self.posterior
         mean = rows @ post.mean

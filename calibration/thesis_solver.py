@@ -51,12 +51,15 @@ def solve_thesis(
     orders: OrderChoice | None = None,
     prior: ThesisPrior | None = None,
     basis_kind: BasisKind = "legendre",
+    allow_prior_dominated: bool = False,
 ) -> Solution:
     """Noise-wave parameters by the thesis's conjugate-prior method.
 
     ``orders=None`` chooses the orders by evidence (section 4.2.3, with the search of
     :mod:`calibration.order_search`). ``basis_kind="power"`` uses the thesis's
     ``(nu/nu_0)^k`` (eq. 3.40); the default Legendre basis spans the same space.
+    ``allow_prior_dominated`` lets the prior fix directions the data leave free (the
+    thesis's single-load posteriors of fig. 4.3); otherwise that is an error.
     """
     choice = orders or OrderChoice()
     prior = prior or ThesisPrior()
@@ -64,7 +67,7 @@ def solve_thesis(
     temps, q, _ = data.stacked()
     features = data.terms().matrix(q)
     weights = np.ones_like(temps)
-    mean0, var0 = prior.coefficients.vectors(choice.largest)
+    _, var0 = prior.coefficients.vectors(choice.largest)
     normal = build_normal_equations(
         features,
         weights,
@@ -74,7 +77,12 @@ def solve_thesis(
         ridge=prior.sigma_p_k**2 / var0,
     )
     posterior, table = fit(
-        normal, choice, prior.coefficients, prior.sigma_p_k**2, prior.scale_prior
+        normal,
+        choice,
+        prior.coefficients,
+        prior.sigma_p_k**2,
+        prior.scale_prior,
+        allow_prior_dominated,
     )
     return Solution(
         method="thesis",
