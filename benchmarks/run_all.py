@@ -1,0 +1,71 @@
+"""Run the accuracy, speed and memory benchmarks and print their ratios from this run.
+
+Usage (from the repository root, with the ``bench`` extra installed)::
+
+    python -m benchmarks.run_all
+
+Every number in the final summary was measured by this invocation; nothing is cached.
+See ``benchmarks/README.md`` for what each number means.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+
+import numpy as np
+
+from benchmarks import accuracy, memory, speed
+
+
+def main() -> int:
+    """Run all three benchmarks; print the summary. Returns 0 (timings are not asserted)."""
+    import edges_cal
+    import scipy
+
+    start = time.perf_counter()
+    print(
+        f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
+        f"edges-cal {edges_cal.__version__}, {platform.machine()}"
+    )
+    acc = accuracy.main()
+    speeds = speed.main()
+    mem = memory.main()
+    print("=" * 100)
+    print("SUMMARY (all measured in this run)")
+    print("=" * 100)
+    ours = acc.median_ratio(accuracy.RADIOMETRIC)
+    print(
+        f"  accuracy  median error/floor, ours            {ours:6.3f}   target <= "
+        f"{accuracy.TARGET_RATIO}: {'PASS' if acc.passed else 'FAIL'}"
+    )
+    print(
+        f"            median error/floor, thesis          {acc.median_ratio(accuracy.THESIS):6.3f}"
+    )
+    print(
+        f"            median error/floor, edges-cal       "
+        f"{acc.median_ratio(accuracy.EDGES):6.3f}   (4 loads; same 12-calibrator floor)"
+    )
+    print(
+        f"            error ratio ours / edges-cal        "
+        f"{acc.median_error(accuracy.RADIOMETRIC) / acc.median_error(accuracy.EDGES):6.3f}"
+        "   (median errors)"
+    )
+    for result in speeds:
+        print(
+            f"  speed     ours {result.median(speed.OURS):6.3f} s, edges-cal "
+            f"{result.median(speed.EDGES):6.3f} s, thesis {result.median(speed.THESIS):6.3f} s; "
+            f"ours/edges-cal = {result.ratio_to_edges:5.2f}; target <= 1 s: "
+            f"{'PASS' if result.passed else 'FAIL'}   [{result.label}]"
+        )
+    print(
+        f"  memory    peak RSS {mem.peak_rss / memory.MB:6.1f} MB = {mem.ratio:.3f} x 500 MB "
+        f"(solve's own allocations {mem.traced_peak / memory.MB:.1f} MB); "
+        f"target <= 500 MB: {'PASS' if mem.passed else 'FAIL'}"
+    )
+    print(f"  total benchmark time {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
