@@ -1,0 +1,383 @@
+"""``reach-cal``: simulate, solve, apply and summarise noise-wave calibrations.
+
+::
+
+    reach-cal simulate -o RUN.h5 [--seed N] [--integration-s S] [--channel-width-hz B]
+                       [--band LO HI] [--calibrators a,b,...] [--vna-sigma X]
+    reach-cal solve RUN.h5 -o SOLUTION.h5 [--method radiometric|thesis]
+                    [--orders n_unc,n_cos,n_sin,n_NS,n_L | --max-orders ...] [--calibrators ...]
+    reach-cal apply SOLUTION.h5 RUN.h5 [--source ant] [-o OUT.h5] [--csv OUT.csv]
+    reach-cal summary SOLUTION.h5 [--run RUN.h5 --source ant]
+
+Files are those of :mod:`calibration.hdf5_io`. Errors an operator can act on (unreadable or
+malformed files, unusable data, an unsolvable model) print ``reach-cal: error: <message>``
+on stderr without a traceback and exit with status 2, as do usage errors; success is 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .data import CalibrationData, SourceData
+from .errors import CalibrationError, InvalidDataError
+from .hdf5_io import (
+    read_run,
+    read_solution,
+    read_truth,
+    write_calibrated,
+    write_run,
+    write_solution,
+)
+from .model_fit import OrderChoice
+from .noise_floor import noise_floor
+from .noise_waves import PARAMETERS, design_terms, source_temperature
+from .polynomial_model import Orders, coefficient_slices
+from .radiometric_solver import solve_radiometric
+from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
+from .solution import CalibratedSpectrum, Solution
+from .thesis_solver import solve_thesis
+
+PROG = "reach-cal"
+ORDER_NAMES = ", ".join(PARAMETERS)
+
+
+def _orders(text: str) -> Orders:
+    """Parse ``n_unc,n_cos,n_sin,n_NS,n_L`` (argparse type)."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != len(PARAMETERS) or min(values) < 0:
+        raise argparse.ArgumentTypeError(
+            f"expected {len(PARAMETERS)} comma-separated term counts >= 0 ({ORDER_NAMES}), "
+            f"got {text!r}"
+        )
+    return values  # type: ignore[return-value]
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """Parse a comma-separated list of source names (argparse type)."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise argparse.ArgumentTypeError("expected comma-separated source names")
+    return names
+
+
+def _output(text: str) -> str:
+    """An output path whose directory exists (argparse type): fail before the work."""
+    parent = Path(text).parent
+    if not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"directory {str(parent)!r} does not exist")
+    return text
+
+
+def _rms(values: NDArray[np.float64]) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def _mk(kelvin: float) -> str:
+    return f"{kelvin * 1e3:.3f} mK"
+
+
+def _pick_source(
+    data: CalibrationData, extra: dict[str, SourceData], name: str, run: str
+) -> SourceData:
+    """The named source of a run: a non-calibrator (e.g. ``ant``) or a calibrator."""
+    source = extra.get(name) or data.sources.get(name)
+    if source is None:
+        have = ", ".join([*extra, *data.sources])
+        raise InvalidDataError(f"{run} has no source {name!r} (it has: {have})")
+    return source
+
+
+def _check_band(solution: Solution, data: CalibrationData, run: str) -> None:
+    """Refuse to extrapolate the solution's polynomials outside its band."""
+    lo, hi = solution.basis.f_lo_hz, solution.basis.f_hi_hz
+    tol = 1e-9 * hi
+    if data.freq_hz[0] < lo - tol or data.freq_hz[-1] > hi + tol:
+        raise InvalidDataError(
+            f"{run} covers {data.freq_hz[0] / 1e6:.3f}-{data.freq_hz[-1] / 1e6:.3f} MHz, "
+            f"outside the solution's band {lo / 1e6:.3f}-{hi / 1e6:.3f} MHz"
+        )
+
+
+def _calibrate(
+    solution: Solution, run: str, name: str
+) -> tuple[CalibrationData, SourceData, CalibratedSpectrum]:
+    """Read ``run`` and calibrate its source ``name`` with ``solution``."""
+    data, extra = read_run(run)
+    source = _pick_source(data, extra, name, run)
+    _check_band(solution, data, run)
+    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, source, data.channel_width_hz)
+    return data, source, spectrum
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Write a simulated run with the validation source ``ant`` and the truth."""
+    unknown = [n for n in args.calibrators if n not in REACH_CALIBRATORS]
+    if unknown:
+        known = ", ".join(REACH_CALIBRATORS)
+        raise InvalidDataError(f"unknown calibrators {unknown}; REACH has: {known}")
+    lo, hi = args.band
+    if not 0 < lo < hi:
+        raise InvalidDataError(f"--band needs 0 < LO < HI (MHz), got {lo} {hi}")
+    config = SimulationConfig(
+        f_lo_hz=lo * 1e6,
+        f_hi_hz=hi * 1e6,
+        channel_width_hz=args.channel_width_hz,
+        integration_s=args.integration_s,
+        calibrators=args.calibrators,
+        vna_sigma=args.vna_sigma,
+    )
+    run = simulate_run(config, rng=args.seed)
+    write_run(
+        args.output,
+        run.data,
+        {run.validation.name: run.validation},
+        attrs={"simulation_seed": args.seed},
+        truth=run.truth,
+    )
+    print(
+        f"wrote {args.output}: {len(run.data.names)} calibrators + {run.validation.name!r}, "
+        f"{run.data.n_channels} channels, {lo:g}-{hi:g} MHz, seed {args.seed}"
+    )
+    return 0
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    """Solve a run for the noise-wave parameters and write the solution."""
+    data, _ = read_run(args.run)
+    if args.calibrators:
+        data = data.subset(args.calibrators)
+    choice = None
+    if args.orders is not None:
+        choice = OrderChoice.fixed(args.orders)
+    elif args.max_orders is not None:
+        if min(args.max_orders) < 1:
+            raise InvalidDataError("--max-orders must be >= 1 for every parameter")
+        choice = OrderChoice(max_orders=args.max_orders)
+    solver = solve_radiometric if args.method == "radiometric" else solve_thesis
+    start = time.perf_counter()
+    solution = solver(data, choice, basis_kind=args.basis)
+    elapsed = time.perf_counter() - start
+    solution = replace(
+        solution,
+        metadata={**solution.metadata, "run_file": str(args.run), "solve_time_s": elapsed},
+    )
+    write_solution(args.output, solution)
+    post = solution.posterior
+    print(
+        f"solved {args.run} ({args.method}, {len(data.names)} calibrators, "
+        f"{data.n_channels} channels) in {elapsed:.2f} s"
+    )
+    how = "fixed" if args.orders else f"best of {len(solution.evidence_table)} by evidence"
+    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.orders))} ({how})")
+    print(f"log evidence: {post.log_evidence:.3f}")
+    print(_noise_line(solution))
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _noise_line(solution: Solution) -> str:
+    var = solution.posterior.noise_variance
+    if solution.measurement_model == "homoscedastic":
+        return f"noise sigma: {np.sqrt(var):.6g} K (homoscedastic, on the calibrator temperatures)"
+    return f"noise scale s^2: {var:.4f} (s = {np.sqrt(var):.4f}; 1 = radiometer equation exact)"
+
+
+def cmd_apply(args: argparse.Namespace) -> int:
+    """Calibrate a source of a run with a solution."""
+    solution = read_solution(args.solution)
+    _, _, spectrum = _calibrate(solution, args.run, args.source)
+    if args.output:
+        files = {"solution_file": str(args.solution), "run_file": str(args.run)}
+        write_calibrated(args.output, spectrum, args.source, attrs=files)
+    if args.csv:
+        _write_csv(Path(args.csv), spectrum)
+    print(
+        f"calibrated {args.source!r}: {spectrum.freq_hz.size} channels, "
+        f"mean temperature {np.mean(spectrum.mean):.3f} K"
+    )
+    print(
+        f"RMS std: total {_mk(_rms(spectrum.std))}, calibration "
+        f"{_mk(_rms(spectrum.std_calibration))}, measurement {_mk(_rms(spectrum.std_measurement))}"
+    )
+    for path in (args.output, args.csv):
+        if path:
+            print(f"wrote {path}")
+    return 0
+
+
+def _write_csv(path: Path, spectrum: CalibratedSpectrum) -> None:
+    """Write the calibrated spectrum as CSV (atomically: temporary file, then rename)."""
+    table = np.column_stack(
+        [
+            spectrum.freq_hz,
+            spectrum.mean,
+            spectrum.std,
+            spectrum.std_calibration,
+            spectrum.std_measurement,
+        ]
+    )
+    tmp = path.with_name(f".{path.name}.tmp")
+    header = "freq_hz,mean_k,std_k,std_calibration_k,std_measurement_k"
+    np.savetxt(tmp, table, delimiter=",", header=header, comments="", fmt="%.10g")
+    os.replace(tmp, path)
+
+
+def cmd_summary(args: argparse.Namespace) -> int:
+    """Print a solution's parameters and evidence, and its distance to the noise floor."""
+    solution = read_solution(args.solution)
+    post, basis = solution.posterior, solution.basis
+    print(
+        f"solution {args.solution}: {solution.method} solver, {basis.kind} basis on "
+        f"{basis.f_lo_hz / 1e6:.3f}-{basis.f_hi_hz / 1e6:.3f} MHz"
+    )
+    print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
+    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.orders))}")
+    print("coefficients (K, posterior mean +- std):")
+    std = np.sqrt(np.diag(post.covariance))
+    for name, s in zip(PARAMETERS, coefficient_slices(solution.orders), strict=True):
+        terms = ", ".join(f"{m:.6g} +- {e:.2g}" for m, e in zip(post.mean[s], std[s], strict=True))
+        print(f"  {name:>3}: {terms or '(none)'}")
+    print(f"log evidence: {post.log_evidence:.3f} (posterior dof {post.dof:.6g})")
+    table = sorted(solution.evidence_table.items(), key=lambda kv: -kv[1])
+    best = table[0][1] if table else post.log_evidence
+    print(f"evidence table: {len(table)} models, top {min(args.top, len(table))}:")
+    for orders, logz in table[: args.top]:
+        print(f"  {','.join(map(str, orders)):<14} log Z = {logz:.3f}  (delta {logz - best:.3f})")
+    print(_noise_line(solution))
+    if args.run:
+        _floor_summary(solution, args.run, args.source)
+    return 0
+
+
+def _floor_summary(solution: Solution, run: str, name: str) -> None:
+    """Noise floor, predicted and (for simulations) actual calibration error of a source."""
+    data, source, spectrum = _calibrate(solution, run, name)
+    used = [n for n in solution.calibrators if n in data.sources]
+    cal_data = data.subset(used) if len(used) == len(solution.calibrators) and used else data
+    floor = noise_floor(cal_data, source, solution.parameters).rms
+    predicted = _rms(spectrum.std_calibration)
+    print(f"source {name!r} of {run} ({len(cal_data.names)} calibrators):")
+    print(f"  noise floor RMS (Cramer-Rao, radiometer noise): {_mk(floor)}")
+    print(f"  predicted calibration std RMS: {_mk(predicted)}")
+    print(f"  distance to floor (predicted / floor): {predicted / floor:.3f}")
+    truth = read_truth(run)
+    if truth is not None:
+        terms = design_terms(source.gamma, data.gamma_rec)
+        true_t = source_temperature(truth.theta(data.freq_hz), terms, source.q)
+        actual = _rms(spectrum.mean - true_t)
+        print(
+            f"  actual calibration error RMS (solution vs true parameters, same Q): "
+            f"{_mk(actual)} ({actual / floor:.3f} x floor)"
+        )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``reach-cal`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Simulate, solve, apply and summarise REACH noise-wave calibrations.",
+        epilog="Exit status: 0 success, 2 error (message on stderr).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, func: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=(func.__doc__ or "").split("\n")[0], description=func.__doc__)
+        p.set_defaults(func=func)
+        return p
+
+    sim = command("simulate", cmd_simulate)
+    sim.add_argument("-o", "--output", type=_output, required=True, help="run file to write (HDF5)")
+    sim.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    sim.add_argument(
+        "--integration-s",
+        type=float,
+        default=600.0,
+        help="integration per Dicke position, s (default 600)",
+    )
+    sim.add_argument(
+        "--channel-width-hz",
+        type=float,
+        default=ITPM_CHANNEL_WIDTH_HZ,
+        help="channel width, Hz (default the iTPM's 12207 Hz)",
+    )
+    sim.add_argument(
+        "--band",
+        type=float,
+        nargs=2,
+        default=(50.0, 130.0),
+        metavar=("LO", "HI"),
+        help="band in MHz (default 50 130)",
+    )
+    sim.add_argument(
+        "--calibrators",
+        type=_names,
+        default=REACH_CALIBRATORS,
+        help="comma-separated calibrators (default all twelve)",
+    )
+    sim.add_argument(
+        "--vna-sigma",
+        type=float,
+        default=0.0,
+        help="noise on measured reflection coefficients (default 0)",
+    )
+
+    solve = command("solve", cmd_solve)
+    solve.add_argument("run", help="run file (HDF5)")
+    solve.add_argument(
+        "-o", "--output", type=_output, required=True, help="solution file to write (HDF5)"
+    )
+    solve.add_argument("--method", choices=("radiometric", "thesis"), default="radiometric")
+    solve.add_argument("--basis", choices=("legendre", "power"), default="legendre")
+    orders = solve.add_mutually_exclusive_group()
+    orders.add_argument("--orders", type=_orders, help=f"fixed orders ({ORDER_NAMES})")
+    orders.add_argument(
+        "--max-orders", type=_orders, help="upper limits of the evidence search (default 8 each)"
+    )
+    solve.add_argument("--calibrators", type=_names, help="use only these calibrators")
+
+    apply = command("apply", cmd_apply)
+    apply.add_argument("solution", help="solution file (HDF5)")
+    apply.add_argument("run", help="run file holding the source (HDF5)")
+    apply.add_argument("--source", default="ant", help="source to calibrate (default ant)")
+    apply.add_argument("-o", "--output", type=_output, help="calibrated spectrum to write (HDF5)")
+    apply.add_argument("--csv", type=_output, help="calibrated spectrum to write (CSV)")
+
+    summary = command("summary", cmd_summary)
+    summary.add_argument("solution", help="solution file (HDF5)")
+    summary.add_argument("--run", help="run file: report the noise floor of --source")
+    summary.add_argument("--source", default="ant", help="source of --run (default ant)")
+    summary.add_argument("--top", type=int, default=5, help="evidence-table rows to show")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``reach-cal``; return the exit status (0 success, 2 error)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) and usage errors (2)
+        return exc.code if isinstance(exc.code, int) else 2
+    try:
+        return int(args.func(args))
+    except (CalibrationError, OSError) as err:
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

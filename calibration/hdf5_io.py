@@ -1,0 +1,412 @@
+"""HDF5 files of the calibration engine: runs (REACH layout), solutions, calibrated spectra.
+
+Every file carries root attributes ``format`` (its kind), ``format_version`` (``"1.0"``;
+another major version is refused; a run file without it is read as REACH-native) and
+``software``. Writes are atomic: a temporary file beside the target is written, flushed,
+synced and moved over the target (:func:`os.replace`). Errors name the file and what is
+wrong (:class:`FileFormatError`) or the file and the source (:class:`InvalidDataError`).
+
+Run files (``format = "reach-calibration-run"``) use the layout of REACH's own tools::
+
+    /observation_data/frequencies              (n,) float, Hz
+    /observation_data/lna_s11                  (n,) complex: receiver reflection
+    /observation_data/{src}_spectra            P_source, (n,) or (n_spectra, n)
+    /observation_data/{src}_load_spectra       P_load,   (n,) or (n_spectra, n)
+    /observation_data/{src}_ns_spectra         P_NS,     (n,) or (n_spectra, n)
+    /observation_data/{src}_s11                (n,) complex: source reflection
+    /observation_data/{src}_q_variance         (n,) optional override of var(Q)
+    /observation_metadata/temperatures/{src}   (n,) or scalar, K: calibrators only
+    /simulation_truth/{orders, coefficients, gain_coefficients, offset_coefficients_k}
+
+``{src}_timestamps`` are allowed and ignored. Attributes: ``units`` on every dataset; on
+``observation_metadata``: ``channel_width_hz``, ``calibrators`` and ``sources`` (names in
+order; without them every source with a temperature is a calibrator, sorted by name); on
+``{src}_spectra``: ``integration_s_source``, ``integration_s_load``, ``integration_s_ns``
+(if absent, the same attributes on ``observation_metadata`` hold for every source); root
+``metadata``: the run's metadata as JSON; on ``simulation_truth``: ``basis_kind``,
+``basis_f_lo_hz``, ``basis_f_hi_hz`` (only in simulated runs: the receiver simulated).
+
+**Integration-time convention.** ``integration_s_*`` is the integration time of *one row*
+of the matching spectra dataset; a 1-D dataset is one row. A 2-D dataset of ``n_spectra``
+rows (REACH's repeated spectra) is averaged over its first axis on reading, with integration
+time ``n_spectra * integration_s_*``. We write 1-D (averaged) spectra with their total time.
+
+Solution files (``format = "reach-calibration-solution"``): root attributes ``method``,
+``measurement_model``, ``calibrators``, ``metadata`` (JSON); ``/basis`` attributes ``kind``,
+``f_lo_hz``, ``f_hi_hz``; ``/posterior`` datasets ``orders`` (5 ints: unc, cos, sin, NS, L),
+``mean`` (K), ``scale`` (K^2), attributes ``dof``, ``log_evidence``, ``noise_variance``,
+``chi2``, ``n_rows``; ``/evidence`` datasets ``orders`` (n_models, 5) and ``log_evidence``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterator, Mapping
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .basis import PolynomialBasis
+from .conjugate import LinearPosterior
+from .data import CalibrationData, Integration, SourceData, check_source
+from .errors import FileFormatError, InvalidDataError
+from .noise_waves import N_PARAMETERS, PARAMETERS
+from .polynomial_model import Orders, PolynomialParameters, as_orders
+from .simulate import ReceiverTruth
+from .solution import CalibratedSpectrum, Solution
+
+PathLike = str | os.PathLike[str]
+FORMAT_VERSION = "1.0"
+RUN_FORMAT = "reach-calibration-run"
+SOLUTION_FORMAT = "reach-calibration-solution"
+CALIBRATED_FORMAT = "reach-calibrated-spectrum"
+POWER_UNITS = "arbitrary (spectrometer power)"
+GAMMA_UNITS = "1 (complex reflection coefficient)"
+_MAJOR = FORMAT_VERSION.split(".")[0]
+_RESERVED_ATTRS = {"format", "format_version", "software", "metadata"}
+_POSTERIOR_FLOATS = ("dof", "log_evidence", "noise_variance", "chi2")
+_POSITIONS = (("source", "spectra"), ("load", "load_spectra"), ("ns", "ns_spectra"))
+_TRUTH_TUPLES = ("gain_coefficients", "offset_coefficients_k")
+
+
+def software_version() -> str:
+    """Name and version of the writing software, as stored in every file."""
+    try:
+        return f"reach-receiver {importlib_metadata.version('reach-receiver')}"
+    except importlib_metadata.PackageNotFoundError:
+        return "reach-receiver (not installed)"
+
+
+def _json(value: Mapping[str, Any]) -> str:
+    """JSON of metadata; numpy values become lists/scalars, anything else its ``str``."""
+    return json.dumps(dict(value), default=lambda v: getattr(v, "tolist", lambda: str(v))())
+
+
+def _as_str(value: Any) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+@contextlib.contextmanager
+def _atomic_h5(path: PathLike, file_format: str) -> Iterator[Any]:
+    """Yield an open HDF5 file that replaces ``path`` only once completely written."""
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        os.chmod(tmp, target.stat().st_mode & 0o777 if target.exists() else 0o644)
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update(format=file_format, format_version=FORMAT_VERSION)
+            f.attrs["software"] = software_version()
+            yield f
+            f.flush()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def _dataset(group: Any, name: str, value: ArrayLike, units: str) -> Any:
+    ds = group.create_dataset(name, data=np.asarray(value))
+    ds.attrs["units"] = units
+    return ds
+
+
+@contextlib.contextmanager
+def _open(path: PathLike, file_format: str) -> Iterator[Any]:
+    """Open ``path`` for reading and check its ``format`` and ``format_version``."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(2, "no such file", str(p))
+    try:
+        f = h5py.File(p, "r")
+    except OSError as err:
+        raise FileFormatError(f"{p}: not a readable HDF5 file ({err})") from err
+    with f:
+        found = f.attrs.get("format")
+        if found is not None and _as_str(found) != file_format:
+            raise FileFormatError(f"{p}: is a {_as_str(found)!r} file, expected {file_format!r}")
+        version = f.attrs.get("format_version")
+        if version is None and file_format != RUN_FORMAT:
+            raise FileFormatError(f"{p}: no 'format_version' attribute at the root")
+        if version is not None and _as_str(version).split(".")[0] != _MAJOR:
+            raise FileFormatError(
+                f"{p}: format_version {_as_str(version)!r} has an unknown major version; "
+                f"this reader understands {_MAJOR}.x"
+            )
+        yield f
+
+
+def _group(parent: Any, name: str, path: PathLike) -> Any:
+    obj = parent.get(name)
+    if not isinstance(obj, h5py.Group):
+        raise FileFormatError(f"{path}: missing group '{parent.name.rstrip('/')}/{name}'")
+    return obj
+
+
+def _array(parent: Any, name: str, path: PathLike, kinds: str = "iuf") -> NDArray[Any]:
+    obj = parent.get(name)
+    where = f"{parent.name.rstrip('/')}/{name}"
+    if not isinstance(obj, h5py.Dataset):
+        raise FileFormatError(f"{path}: missing dataset '{where}'")
+    value = np.asarray(obj[()])
+    if value.dtype.kind not in kinds:
+        raise FileFormatError(f"{path}: dataset '{where}' has the wrong dtype {value.dtype}")
+    return value
+
+
+def _attr(obj: Any, name: str, path: PathLike) -> Any:
+    if name not in obj.attrs:
+        raise FileFormatError(f"{path}: missing attribute '{name}' on '{obj.name}'")
+    return obj.attrs[name]
+
+
+def _names(obj: Any, key: str) -> list[str] | None:
+    return [_as_str(n) for n in np.atleast_1d(obj.attrs[key])] if key in obj.attrs else None
+
+
+def _metadata(f: Any, path: PathLike) -> dict[str, Any]:
+    with contextlib.suppress(json.JSONDecodeError):
+        value = json.loads(_as_str(f.attrs.get("metadata", "{}")))
+        if isinstance(value, dict):
+            return value
+    raise FileFormatError(f"{path}: root attribute 'metadata' is not a JSON object")
+
+
+def _in_file(err: InvalidDataError, path: PathLike) -> InvalidDataError:
+    out = InvalidDataError(f"{path}: {err}")
+    out.source = err.source
+    return out
+
+
+def write_run(
+    path: PathLike,
+    data: CalibrationData,
+    extra_sources: Mapping[str, SourceData] | None = None,
+    attrs: Mapping[str, Any] | None = None,
+    truth: ReceiverTruth | None = None,
+) -> None:
+    """Write a calibration run in the REACH layout (module docstring), atomically.
+
+    Parameters
+    ----------
+    extra_sources
+        Sources that are not calibrators (e.g. the antenna ``ant``), by name.
+    attrs
+        Extra root attributes (not ``format``, ``format_version``, ``software``, ``metadata``).
+    truth
+        The simulated receiver, stored in ``simulation_truth``.
+    """
+    extra = dict(extra_sources or {})
+    bad = sorted(set(extra) & set(data.sources)) + [k for k, s in extra.items() if k != s.name]
+    if bad:
+        raise InvalidDataError(f"extra sources {bad} are calibrators too or not keyed by name")
+    if _RESERVED_ATTRS & set(attrs or {}):
+        raise ValueError(f"root attributes {sorted(_RESERVED_ATTRS)} are written by write_run")
+    sources = {**data.sources, **{k: check_source(s, data.n_channels) for k, s in extra.items()}}
+    with _atomic_h5(path, RUN_FORMAT) as f:
+        f.attrs.update({**dict(attrs or {}), "metadata": _json(data.metadata)})
+        obs = f.create_group("observation_data")
+        _dataset(obs, "frequencies", data.freq_hz, "Hz")
+        _dataset(obs, "lna_s11", data.gamma_rec, GAMMA_UNITS)
+        meta = f.create_group("observation_metadata")
+        meta.attrs.update(
+            channel_width_hz=float(data.channel_width_hz),
+            calibrators=list(data.names),
+            sources=list(sources),
+        )
+        temps = meta.create_group("temperatures")
+        for name, src in sources.items():
+            spectra = _dataset(obs, f"{name}_spectra", src.p_source, POWER_UNITS)
+            for p, _ in _POSITIONS:
+                spectra.attrs[f"integration_s_{p}"] = float(getattr(src.integration, f"{p}_s"))
+            _dataset(obs, f"{name}_load_spectra", src.p_load, POWER_UNITS)
+            _dataset(obs, f"{name}_ns_spectra", src.p_ns, POWER_UNITS)
+            _dataset(obs, f"{name}_s11", src.gamma, GAMMA_UNITS)
+            if src.q_variance_override is not None:
+                _dataset(obs, f"{name}_q_variance", src.q_variance_override, "1")
+            if src.temperature_k is not None:
+                _dataset(temps, name, src.temperature_k, "K")
+        if truth is not None:
+            g = f.create_group("simulation_truth")
+            params = truth.parameters
+            g.attrs.update(
+                basis_kind=params.basis.kind,
+                basis_f_lo_hz=params.basis.f_lo_hz,
+                basis_f_hi_hz=params.basis.f_hi_hz,
+                parameters=list(PARAMETERS),
+            )
+            _dataset(g, "orders", np.asarray(params.orders, dtype=np.int64), "terms")
+            _dataset(g, "coefficients", params.coefficients, "K")
+            _dataset(g, _TRUTH_TUPLES[0], np.asarray(truth.gain_coefficients), "power per K")
+            _dataset(g, _TRUTH_TUPLES[1], np.asarray(truth.offset_coefficients_k), "K")
+
+
+def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> SourceData:
+    """One source; 2-D spectra averaged over their first axis, times scaled to match."""
+    powers, seconds = [], []
+    for position, suffix in _POSITIONS:
+        arr = _array(obs, f"{name}_{suffix}", path).astype(float)
+        key, first = f"integration_s_{position}", obs[f"{name}_spectra"]
+        per_row = float(
+            _attr(meta if key in meta.attrs and key not in first.attrs else first, key, path)
+        )
+        if arr.ndim not in (1, 2) or arr.shape[0] == 0:
+            raise FileFormatError(f"{path}: {name}_{suffix} has shape {arr.shape}: not 1-D/2-D")
+        powers.append(arr.mean(axis=0) if arr.ndim == 2 else arr)
+        seconds.append(per_row * (arr.shape[0] if arr.ndim == 2 else 1))
+    gamma = _array(obs, f"{name}_s11", path, "iufc").astype(complex)
+    temperature = _array(temps, name, path).astype(float) if name in temps else None
+    q_var = f"{name}_q_variance"
+    override = _array(obs, q_var, path).astype(float) if q_var in obs else None
+    try:
+        integration = Integration(*seconds)
+    except InvalidDataError as err:
+        raise InvalidDataError(str(err), name) from err
+    p_src, p_load, p_ns = powers
+    return SourceData(name, gamma, p_src, p_load, p_ns, integration, temperature, override)
+
+
+def read_run(path: PathLike) -> tuple[CalibrationData, dict[str, SourceData]]:
+    """Read a run file: the calibrators, and the other sources (e.g. ``ant``) by name.
+
+    2-D spectra are averaged over their first axis (module docstring).
+    """
+    with _open(path, RUN_FORMAT) as f:
+        obs = _group(f, "observation_data", path)
+        meta = _group(f, "observation_metadata", path)
+        temps = _group(meta, "temperatures", path)
+        freq = _array(obs, "frequencies", path).astype(float)
+        gamma_rec = _array(obs, "lna_s11", path, "iufc").astype(complex)
+        width = float(_attr(meta, "channel_width_hz", path))
+        discovered = sorted(k[:-4] for k in obs if k.endswith("_s11") and k != "lna_s11")
+        names = _names(meta, "sources") or discovered
+        calibrators = _names(meta, "calibrators") or [n for n in names if n in temps]
+        missing = [n for n in calibrators if n not in names]
+        if missing:
+            raise FileFormatError(f"{path}: calibrators {missing} have no data")
+        run_metadata = _metadata(f, path)
+        try:
+            sources = {n: _read_source(obs, meta, temps, n, path) for n in names}
+        except InvalidDataError as err:
+            raise _in_file(err, path) from err
+    try:
+        cals = {n: sources[n] for n in calibrators}
+        data = CalibrationData(freq, gamma_rec, cals, width, run_metadata)
+        n = data.n_channels
+        return data, {k: check_source(s, n) for k, s in sources.items() if k not in cals}
+    except InvalidDataError as err:
+        raise _in_file(err, path) from err
+
+
+def _basis(obj: Any, path: PathLike, prefix: str = "") -> PolynomialBasis:
+    try:
+        return PolynomialBasis(
+            _as_str(_attr(obj, f"{prefix}kind", path)),  # type: ignore[arg-type]
+            float(_attr(obj, f"{prefix}f_lo_hz", path)),
+            float(_attr(obj, f"{prefix}f_hi_hz", path)),
+        )
+    except ValueError as err:
+        raise FileFormatError(f"{path}: bad basis on '{obj.name}': {err}") from err
+
+
+def _orders(value: NDArray[Any], path: PathLike) -> Orders:
+    if value.shape != (N_PARAMETERS,) or value.dtype.kind not in "iu" or np.any(value < 0):
+        raise FileFormatError(f"{path}: orders must be {N_PARAMETERS} integers >= 0: {value}")
+    return as_orders(value.tolist())
+
+
+def read_truth(path: PathLike) -> ReceiverTruth | None:
+    """Read the simulated receiver of a run file (``None`` for a measured run)."""
+    with _open(path, RUN_FORMAT) as f:
+        if "simulation_truth" not in f:
+            return None
+        g = _group(f, "simulation_truth", path)
+        orders = _orders(_array(g, "orders", path), path)
+        coefficients = _array(g, "coefficients", path)
+        if coefficients.shape != (sum(orders),):
+            raise FileFormatError(f"{path}: simulation_truth coefficients do not match orders")
+        params = PolynomialParameters(_basis(g, path, "basis_"), orders, coefficients)
+        gain, offset = (tuple(float(v) for v in _array(g, k, path)) for k in _TRUTH_TUPLES)
+        return ReceiverTruth(params, gain, offset)
+
+
+def write_solution(path: PathLike, solution: Solution) -> None:
+    """Write a :class:`Solution` (atomically); :func:`read_solution` restores it exactly."""
+    post, basis = solution.posterior, solution.basis
+    with _atomic_h5(path, SOLUTION_FORMAT) as f:
+        f.attrs.update({"method": solution.method, "measurement_model": solution.measurement_model})
+        f.attrs.update({"calibrators": list(solution.calibrators)})
+        f.attrs["metadata"] = _json(solution.metadata)
+        b = f.create_group("basis")
+        b.attrs.update({"kind": basis.kind, "f_lo_hz": basis.f_lo_hz, "f_hi_hz": basis.f_hi_hz})
+        g = f.create_group("posterior")
+        g.attrs.update({k: float(getattr(post, k)) for k in _POSTERIOR_FLOATS})
+        g.attrs.update({"n_rows": int(post.n_rows), "parameters": list(PARAMETERS)})
+        g.attrs["noise_variance_units"] = (
+            "K^2" if solution.measurement_model == "homoscedastic" else "1 (scale of var Q)"
+        )
+        _dataset(g, "orders", np.asarray(post.orders, dtype=np.int64), "terms")
+        _dataset(g, "mean", post.mean, "K")
+        _dataset(g, "scale", post.scale, "K^2")
+        table = solution.evidence_table
+        ev = f.create_group("evidence")
+        rows = np.array(list(table), dtype=np.int64).reshape(len(table), N_PARAMETERS)
+        _dataset(ev, "orders", rows, "terms")
+        _dataset(ev, "log_evidence", np.array(list(table.values()), dtype=float), "nats")
+
+
+def read_solution(path: PathLike) -> Solution:
+    """Read a solution written by :func:`write_solution`."""
+    with _open(path, SOLUTION_FORMAT) as f:
+        basis = _basis(_group(f, "basis", path), path)
+        g = _group(f, "posterior", path)
+        orders = _orders(_array(g, "orders", path), path)
+        mean = _array(g, "mean", path).astype(float)
+        scale = _array(g, "scale", path).astype(float)
+        n = sum(orders)
+        if mean.shape != (n,) or scale.shape != (n, n):
+            raise FileFormatError(f"{path}: posterior mean/scale do not match orders {orders}")
+        dof, logz, noise, chi2 = (float(_attr(g, k, path)) for k in _POSTERIOR_FLOATS)
+        posterior = LinearPosterior(
+            orders, mean, scale, dof, logz, noise, chi2, int(_attr(g, "n_rows", path))
+        )
+        ev = _group(f, "evidence", path)
+        ev_orders = _array(ev, "orders", path)
+        ev_logz = _array(ev, "log_evidence", path).astype(float)
+        if ev_orders.shape != (ev_logz.size, N_PARAMETERS):
+            raise FileFormatError(f"{path}: evidence orders {ev_orders.shape} vs log_evidence")
+        table = {_orders(o, path): float(z) for o, z in zip(ev_orders, ev_logz, strict=True)}
+        model = _as_str(_attr(f, "measurement_model", path))
+        if model not in ("radiometer", "homoscedastic"):
+            raise FileFormatError(f"{path}: unknown measurement_model {model!r}")
+        method, calibrators = _as_str(_attr(f, "method", path)), _names(f, "calibrators")
+        return Solution(
+            method,
+            basis,
+            posterior,
+            model,
+            table,  # type: ignore[arg-type]
+            tuple(calibrators or ()),
+            _metadata(f, path),
+        )
+
+
+def write_calibrated(
+    path: PathLike, spectrum: CalibratedSpectrum, source: str, attrs: dict[str, Any] | None = None
+) -> None:
+    """Write a calibrated spectrum: ``frequencies`` (Hz), ``mean`` and the stds (K)."""
+    with _atomic_h5(path, CALIBRATED_FORMAT) as f:
+        f.attrs.update({**dict(attrs or {}), "source": source, "dof": float(spectrum.dof)})
+        _dataset(f, "frequencies", spectrum.freq_hz, "Hz")
+        for name in ("mean", "std", "std_calibration", "std_measurement"):
+            _dataset(f, name, getattr(spectrum, name), "K")
