@@ -394,8 +394,8 @@ def read_solution(path: PathLike) -> Solution:
             method,
             basis,
             posterior,
-            model,
-            table,  # type: ignore[arg-type]
+            "radiometer" if model == "radiometer" else "homoscedastic",
+            table,
             tuple(calibrators or ()),
             _metadata(f, path),
         )
