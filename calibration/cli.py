@@ -244,6 +244,13 @@ def cmd_summary(args: argparse.Namespace) -> int:
     )
     print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
     print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.orders))}")
+    at_ceiling = solution.metadata.get("orders_at_ceiling") or []
+    if at_ceiling:
+        print(
+            f"warning: {', '.join(at_ceiling)} reached the order ceiling "
+            f"{solution.metadata.get('order_limits')}: the data want more terms than were "
+            "searched (unmodelled structure?)"
+        )
     print("coefficients (K, posterior mean +- std):")
     std = np.sqrt(np.diag(post.covariance))
     for name, s in zip(PARAMETERS, coefficient_slices(solution.orders), strict=True):

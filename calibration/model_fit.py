@@ -7,8 +7,8 @@ priors.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,12 +21,20 @@ from .polynomial_model import Orders, as_orders
 
 @dataclass(frozen=True)
 class OrderChoice:
-    """Fixed orders, or a search between ``min_orders`` and ``max_orders``."""
+    """Fixed orders, or a search between ``min_orders`` and ``max_orders``.
+
+    When the evidence-best model reaches ``max_orders`` in some parameter, the data want
+    more terms than the search allowed: the limit of that parameter is raised by
+    ``extend_step`` and the search resumed, up to ``ceiling`` terms. A parameter still at
+    the ceiling is reported in the solution's metadata (``orders_at_ceiling``).
+    """
 
     orders: Orders | None = None
     min_orders: Orders = (1, 1, 1, 1, 1)
     max_orders: Orders = (8, 8, 8, 8, 8)
     lookahead: int = 2
+    extend_step: int = 4
+    ceiling: int = 16
 
     @classmethod
     def fixed(cls, orders: Sequence[int]) -> OrderChoice:
@@ -65,6 +73,7 @@ def fit(
     prior_variance_scale: float,
     scale_prior: ScalePrior | None,
     allow_prior_dominated: bool = False,
+    starts: Sequence[Orders] = (),
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """Posterior of the chosen (or evidence-best) model and the evidence table.
 
@@ -90,8 +99,76 @@ def fit(
             return -np.inf
 
     result = search_orders(
-        log_evidence, choice.min_orders, choice.max_orders, lookahead=choice.lookahead
+        log_evidence,
+        choice.min_orders,
+        choice.max_orders,
+        starts=[
+            s for s in starts if all(n <= m for n, m in zip(s, choice.max_orders, strict=True))
+        ],
+        lookahead=choice.lookahead,
     )
     if not np.isfinite(result.log_evidence):
         raise IllPosedError("no model between the order limits is constrained by the data")
     return posterior(result.best), result.table
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A fit with its evidence table, the normal equations it used and the order limits."""
+
+    posterior: LinearPosterior
+    table: dict[Orders, float]
+    normal: NormalEquations
+    max_orders: Orders
+    at_ceiling: tuple[str, ...]
+
+    def limits_metadata(self) -> dict[str, list[int] | list[str]]:
+        """The order limits searched and the parameters left at the hard ceiling."""
+        return {"order_limits": list(self.max_orders), "orders_at_ceiling": list(self.at_ceiling)}
+
+
+def fit_extending(
+    build: Callable[[Orders], NormalEquations],
+    choice: OrderChoice,
+    prior: CoefficientPrior,
+    prior_variance_scale: float,
+    scale_prior: ScalePrior | None,
+    allow_prior_dominated: bool = False,
+) -> FitResult:
+    """:func:`fit` on ``build(max_orders)``, raising limits the evidence runs into.
+
+    ``build`` makes the normal equations for given largest orders (the solvers' likelihood).
+    """
+    from .noise_waves import PARAMETERS
+
+    largest = choice.largest
+    table: dict[Orders, float] = {}
+    best: tuple[Orders, ...] = ()
+    while True:
+        normal = build(largest)
+        post, part = fit(
+            normal,
+            replace(choice, max_orders=largest) if choice.orders is None else choice,
+            prior,
+            prior_variance_scale,
+            scale_prior,
+            allow_prior_dominated,
+            starts=best,
+        )
+        table.update(part)
+        best = (post.orders,)
+        hit = [
+            k
+            for k, (n, m) in enumerate(zip(post.orders, largest, strict=True))
+            if n == m and choice.orders is None
+        ]
+        grow = [k for k in hit if largest[k] < choice.ceiling]
+        if not grow:
+            names = tuple(PARAMETERS[k] for k in hit)
+            return FitResult(post, table, normal, largest, names)
+        largest = as_orders(
+            [
+                min(m + choice.extend_step, choice.ceiling) if k in grow else m
+                for k, m in enumerate(largest)
+            ]
+        )

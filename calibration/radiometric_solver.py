@@ -37,7 +37,7 @@ from .basis import BasisKind, PolynomialBasis
 from .conjugate import CoefficientPrior, ScalePrior
 from .data import CalibrationData
 from .errors import IllPosedError
-from .model_fit import OrderChoice, fit
+from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
@@ -114,26 +114,29 @@ def solve_radiometric(
             "at least two are needed (e.g. ambient and hot loads)"
         )
     basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
-    largest = choice.largest
-    b = basis.matrix(data.freq_hz, max(largest))
     terms = data.terms()
     temps, q, var_q = data.stacked()
 
     def ridge(orders: Orders) -> FloatArray:
         return 1.0 / prior.coefficients.vectors(orders)[1]
 
-    # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
-    start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
-    normal = _normal_equations(start, b, largest, ridge(largest))
-    for _ in range(iterations):
-        theta = evaluate_coefficients(normal.reference, b, largest)
-        normal = _normal_equations(
-            linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest)
-        )
-    posterior, table = fit(normal, choice, prior.coefficients, 1.0, prior.scale)
-    if posterior.orders != largest:
+    def build(largest: Orders) -> NormalEquations:
+        b = basis.matrix(data.freq_hz, max(largest))
+        # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
+        start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
+        normal = _normal_equations(start, b, largest, ridge(largest))
+        for _ in range(iterations):
+            theta = evaluate_coefficients(normal.reference, b, largest)
+            normal = _normal_equations(
+                linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest)
+            )
+        return normal
+
+    result = fit_extending(build, choice, prior.coefficients, 1.0, prior.scale)
+    posterior, table = result.posterior, result.table
+    if posterior.orders != result.max_orders:
         chosen = posterior.orders
-        b_chosen = b[:, : max(chosen)]
+        b_chosen = basis.matrix(data.freq_hz, max(chosen))
         mean = posterior.mean
         for _ in range(iterations):
             theta = evaluate_coefficients(mean, b_chosen, chosen)
@@ -150,4 +153,5 @@ def solve_radiometric(
         measurement_model="radiometer",
         evidence_table=table,
         calibrators=tuple(data.names),
+        metadata=result.limits_metadata(),
     )

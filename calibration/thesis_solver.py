@@ -27,8 +27,9 @@ import numpy as np
 from .basis import BasisKind, PolynomialBasis
 from .conjugate import CoefficientPrior, ScalePrior
 from .data import CalibrationData
-from .model_fit import OrderChoice, fit
-from .normal_equations import build_normal_equations
+from .model_fit import OrderChoice, fit_extending
+from .normal_equations import NormalEquations, build_normal_equations
+from .polynomial_model import Orders
 from .solution import Solution
 
 
@@ -67,29 +68,33 @@ def solve_thesis(
     temps, q, _ = data.stacked()
     features = data.terms().matrix(q)
     weights = np.ones_like(temps)
-    _, var0 = prior.coefficients.vectors(choice.largest)
-    normal = build_normal_equations(
-        features,
-        weights,
-        temps,
-        basis.matrix(data.freq_hz, max(choice.largest)),
-        choice.largest,
-        ridge=prior.sigma_p_k**2 / var0,
-    )
-    posterior, table = fit(
-        normal,
+
+    def build(largest: Orders) -> NormalEquations:
+        _, var0 = prior.coefficients.vectors(largest)
+        return build_normal_equations(
+            features,
+            weights,
+            temps,
+            basis.matrix(data.freq_hz, max(largest)),
+            largest,
+            ridge=prior.sigma_p_k**2 / var0,
+        )
+
+    result = fit_extending(
+        build,
         choice,
         prior.coefficients,
         prior.sigma_p_k**2,
         prior.scale_prior,
         allow_prior_dominated,
     )
+    posterior = result.posterior
     return Solution(
         method="thesis",
         basis=basis,
         posterior=posterior,
         measurement_model="homoscedastic",
-        evidence_table=table,
+        evidence_table=result.table,
         calibrators=tuple(data.names),
-        metadata={"sigma_k": float(np.sqrt(posterior.noise_variance))},
+        metadata={"sigma_k": float(np.sqrt(posterior.noise_variance)), **result.limits_metadata()},
     )
