@@ -17,61 +17,21 @@ with covariance ``(1 - t)^2 Sigma_a + t^2 Sigma_b``. Nothing is extrapolated.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import stats
 
 from .data import CalibrationData, SourceData, check_source
 from .errors import IllPosedError, InvalidDataError
 from .noise_waves import INDEX, N_PARAMETERS, design_terms
 from .radiometric_solver import LinearisedProblem, linearise
+from .solution import CalibratedSpectrum
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 Pair = tuple[FloatArray, FloatArray]
 LOG_2PI = float(np.log(2 * np.pi))
-
-
-@dataclass(frozen=True)
-class ChannelCalibratedSpectrum:
-    """Calibrated temperature of a source from a per-channel solution (K).
-
-    Same public interface as :class:`calibration.solution.CalibratedSpectrum`:
-    ``std_calibration`` is the solution's error ``sqrt(x^T Sigma x)`` (independent between
-    solution channels), ``std_measurement`` the source's own radiometer noise. The
-    posterior is Gaussian, so ``dof`` is always ``inf``.
-    """
-
-    freq_hz: FloatArray
-    mean: FloatArray
-    std_calibration: FloatArray
-    std_measurement: FloatArray
-    rows: FloatArray = field(repr=False)
-    solution: ChannelSolution = field(repr=False)
-    dof: float = np.inf
-
-    @property
-    def std(self) -> FloatArray:
-        """Total predictive standard deviation per channel."""
-        return np.asarray(np.sqrt(self.std_calibration**2 + self.std_measurement**2))
-
-    def interval(self, level: float = 0.68, calibration_only: bool = False) -> Pair:
-        """Central credible interval at ``level`` per channel."""
-        z = float(stats.norm.ppf(0.5 + 0.5 * level))
-        std = self.std_calibration if calibration_only else self.std
-        return self.mean - z * std, self.mean + z * std
-
-    def samples(
-        self, n: int, rng: np.random.Generator, calibration_only: bool = False
-    ) -> FloatArray:
-        """``n`` draws of the calibrated spectrum, shape ``(n, n_channels)``."""
-        theta = self.solution.sample_parameters(self.freq_hz, n, rng)
-        draws = np.einsum("npf,fp->nf", theta, self.rows)
-        if not calibration_only:
-            draws = draws + rng.standard_normal(draws.shape) * self.std_measurement
-        return np.asarray(draws)
 
 
 @dataclass(frozen=True)
@@ -187,7 +147,7 @@ class ChannelSolution:
         gamma_rec: ArrayLike,
         source: SourceData,
         channel_width_hz: float | None = None,
-    ) -> ChannelCalibratedSpectrum:
+    ) -> CalibratedSpectrum:
         """Calibrate ``source`` (eq. 3.27) channel by channel with its uncertainty.
 
         ``freq_hz`` are the source's channels: the solution's own or any inside its band
@@ -216,7 +176,12 @@ class ChannelSolution:
         else:
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * theta[INDEX["NS"]]) * np.sqrt(var_q)
-        return ChannelCalibratedSpectrum(f, mean, std_cal, std_meas, rows, self)
+
+        def draw(n: int, rng: np.random.Generator) -> FloatArray:
+            theta = self.sample_parameters(f, n, rng)
+            return np.asarray(np.einsum("npf,fp->nf", theta, rows))
+
+        return CalibratedSpectrum(f, mean, std_cal, std_meas, np.inf, rows, draw)
 
 
 def solve_least_squares_per_channel(data: CalibrationData) -> ChannelSolution:

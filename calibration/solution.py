@@ -14,7 +14,7 @@ The predictive distribution of ``T_src`` (eq. 3.41) has two independent parts:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -38,8 +38,11 @@ MeasurementModel = Literal["radiometer", "homoscedastic"]
 class CalibratedSpectrum:
     """Calibrated temperature of a source with its predictive uncertainty (K).
 
-    ``std_calibration`` is the solution's error (correlated across channels);
-    ``std_measurement`` the source's own noise (independent per channel).
+    ``std_calibration`` is the solution's error (correlated across channels for a
+    polynomial solution); ``std_measurement`` the source's own noise (independent per
+    channel). ``rows`` are the source's design rows (``mean = rows @ parameters``) and
+    ``draw_calibration(n, rng)`` draws ``n`` calibrated spectra from the solution's
+    posterior alone: every solver (polynomial or per channel) supplies its own.
     """
 
     freq_hz: FloatArray
@@ -48,7 +51,7 @@ class CalibratedSpectrum:
     std_measurement: FloatArray
     dof: float
     rows: FloatArray = field(repr=False)
-    posterior: LinearPosterior = field(repr=False)
+    draw_calibration: Callable[[int, np.random.Generator], FloatArray] = field(repr=False)
 
     @property
     def std(self) -> FloatArray:
@@ -68,7 +71,7 @@ class CalibratedSpectrum:
         self, n: int, rng: np.random.Generator, calibration_only: bool = False
     ) -> FloatArray:
         """``n`` draws of the calibrated spectrum, shape ``(n, n_channels)``."""
-        draws = self.posterior.sample(n, rng) @ self.rows.T
+        draws = self.draw_calibration(n, rng)
         if not calibration_only:
             draws = draws + rng.standard_normal(draws.shape) * self.std_measurement
         return np.asarray(draws)
@@ -173,7 +176,15 @@ class Solution:
             t_ns = self.evaluate(freq)[INDEX["NS"]]
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * t_ns) * np.sqrt(post.noise_variance * var_q)
-        return CalibratedSpectrum(freq, mean, std_cal, std_meas, post.dof, rows, post)
+        return CalibratedSpectrum(
+            freq,
+            mean,
+            std_cal,
+            std_meas,
+            post.dof,
+            rows,
+            lambda n, rng: np.asarray(post.sample(n, rng) @ rows.T),
+        )
 
     def summary(self) -> dict[str, Any]:
         """Plain-data summary: orders, evidence, noise scale, coefficients."""
