@@ -1,0 +1,103 @@
+"""Clocks: where the daemon and the simulators read the time and wait.
+
+Everything that waits or stamps a measurement takes a :class:`Clock`, so the same code
+runs against the wall clock on site and against a compressed clock in dry runs and
+tests: a 2-minute integration then takes milliseconds of real time but carries the
+radiometer noise of 2 minutes (the simulators read the simulated duration, not the
+real one).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Protocol
+
+
+class Clock(Protocol):
+    """What a clock offers: the current time and a way to wait."""
+
+    def now(self) -> float:
+        """Seconds since the Unix epoch, in this clock's time."""
+        ...
+
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` of this clock's time."""
+        ...
+
+
+class SystemClock:
+    """The wall clock."""
+
+    def now(self) -> float:
+        """Seconds since the Unix epoch."""
+        return time.time()
+
+    def sleep(self, seconds: float) -> None:
+        """Wait for real."""
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+class CompressedClock:
+    """Simulated time running ``factor`` times faster than real time.
+
+    ``now() = t0 + factor * (monotonic() - m0)``; ``sleep(s)`` waits ``s / factor``
+    real seconds. All threads that share one instance see the same simulated time, so a
+    simulator streaming spectra and a driver integrating them agree on it.
+
+    Parameters
+    ----------
+    factor
+        Simulated seconds per real second (1 is real time).
+    start
+        Simulated epoch of the moment the clock is made; the wall clock's by default.
+    """
+
+    def __init__(self, factor: float = 1.0, start: float | None = None) -> None:
+        if not factor > 0:
+            raise ValueError(f"time compression factor must be positive, got {factor}")
+        self.factor = float(factor)
+        self._t0 = time.time() if start is None else float(start)
+        self._m0 = time.monotonic()
+
+    def now(self) -> float:
+        """Simulated seconds since the Unix epoch."""
+        return self._t0 + self.factor * (time.monotonic() - self._m0)
+
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` of simulated time."""
+        if seconds > 0:
+            time.sleep(seconds / self.factor)
+
+    def real_seconds(self, simulated_s: float) -> float:
+        """Real seconds that ``simulated_s`` of this clock's time take."""
+        return simulated_s / self.factor
+
+
+class ManualClock:
+    """A clock that moves only when told to: for state-machine tests.
+
+    ``sleep`` advances the time at once (nothing really waits), so code under test that
+    sleeps runs instantly and deterministically.
+    """
+
+    def __init__(self, start: float = 1.7e9) -> None:
+        self._t = float(start)
+        self._lock = threading.Lock()
+
+    def now(self) -> float:
+        """The current manual time."""
+        with self._lock:
+            return self._t
+
+    def sleep(self, seconds: float) -> None:
+        """Advance the time by ``seconds`` immediately."""
+        self.advance(max(seconds, 0.0))
+
+    def advance(self, seconds: float) -> None:
+        """Move the clock forward."""
+        if seconds < 0:
+            raise ValueError("a clock does not run backwards")
+        with self._lock:
+            self._t += seconds

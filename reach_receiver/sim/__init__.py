@@ -1,0 +1,1 @@
+"""Simulated receiver: one physical model behind instruments that speak the real protocols."""

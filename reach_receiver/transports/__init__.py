@@ -1,0 +1,1 @@
+"""Transports: the byte and message channels drivers talk through (serial, SCPI, UDP, USB)."""

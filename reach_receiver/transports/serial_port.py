@@ -1,0 +1,123 @@
+"""Serial transport over pyserial: USB CDC devices (the Teensy) and RS-232 (the TEC).
+
+A thin, timed wrapper: open and close explicitly, write bytes, read up to a terminator
+within a deadline. The deadline is the caller's, not pyserial's per-read timeout, so a
+device that trickles bytes cannot hold a caller longer than asked. The same class serves
+real ports (``/dev/ttyACM0``) and the simulators' pseudo-terminals (``/dev/pts/N``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import serial
+
+from reach_receiver.errors import ConnectionLost, DeviceTimeout, ProtocolError, ReceiverError
+
+
+class SerialTransport:
+    """A byte channel over a serial port.
+
+    Parameters
+    ----------
+    port
+        Device path (``/dev/ttyACM0``, ``/dev/serial/by-id/...``, a pty path).
+    device
+        The instrument's name, used in error messages.
+    baudrate
+        Line speed; USB CDC devices such as the Teensy ignore it.
+    timeout_s
+        Default deadline of one read.
+    """
+
+    def __init__(
+        self, port: str, device: str, baudrate: int = 115200, timeout_s: float = 1.0
+    ) -> None:
+        self.port = port
+        self.device = device
+        self.baudrate = baudrate
+        self.timeout_s = timeout_s
+        self._serial: serial.Serial | None = None
+
+    @property
+    def is_open(self) -> bool:
+        """Whether the port is open."""
+        return self._serial is not None and self._serial.is_open
+
+    def open(self) -> None:
+        """Open the port (no bytes are exchanged)."""
+        if self.is_open:
+            return
+        try:
+            self._serial = serial.Serial(
+                self.port, baudrate=self.baudrate, timeout=0.05, write_timeout=self.timeout_s
+            )
+        except (serial.SerialException, OSError) as err:
+            message = f"cannot open serial port {self.port}: {err}"
+            raise ConnectionLost(self.device, message) from err
+
+    def close(self) -> None:
+        """Close the port; closing a closed port does nothing."""
+        if self._serial is not None:
+            self._serial.close()
+            self._serial = None
+
+    def _port(self) -> serial.Serial:
+        if self._serial is None or not self._serial.is_open:
+            raise ReceiverError(f"{self.device}: serial port {self.port} is not open")
+        return self._serial
+
+    def write(self, data: bytes) -> None:
+        """Write all of ``data``."""
+        port = self._port()
+        try:
+            port.write(data)
+            port.flush()
+        except (serial.SerialException, OSError) as err:
+            raise ConnectionLost(self.device, f"write to {self.port} failed: {err}") from err
+
+    def read_until(
+        self, terminator: bytes, timeout_s: float | None = None, limit: int = 4096
+    ) -> bytes:
+        """Read up to and including ``terminator``, within ``timeout_s``.
+
+        Raises
+        ------
+        DeviceTimeout
+            If the terminator has not arrived by the deadline; the partial bytes are in
+            the message so that a garbled reply can be diagnosed.
+        ProtocolError
+            If ``limit`` bytes arrive without the terminator.
+        """
+        port = self._port()
+        deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        buffer = bytearray()
+        while True:
+            try:
+                chunk = port.read_until(terminator, limit - len(buffer))
+            except (serial.SerialException, OSError) as err:
+                raise ConnectionLost(self.device, f"read from {self.port} failed: {err}") from err
+            buffer += chunk
+            if buffer.endswith(terminator):
+                return bytes(buffer)
+            if len(buffer) >= limit:
+                message = f"reply longer than {limit} bytes: {bytes(buffer[:80])!r}"
+                raise ProtocolError(self.device, message)
+            if time.monotonic() >= deadline:
+                waited = self.timeout_s if timeout_s is None else timeout_s
+                message = f"no complete reply within {waited} s; got {bytes(buffer)!r}"
+                raise DeviceTimeout(self.device, message)
+
+    def discard_input(self, quiet_s: float = 0.05) -> bytes:
+        """Read and drop whatever arrives until the line has been quiet for ``quiet_s``."""
+        port = self._port()
+        dropped = bytearray()
+        deadline = time.monotonic() + quiet_s
+        while time.monotonic() < deadline:
+            waiting = port.in_waiting
+            if waiting:
+                dropped += port.read(waiting)
+                deadline = time.monotonic() + quiet_s
+            else:
+                time.sleep(0.005)
+        return bytes(dropped)
