@@ -1,0 +1,130 @@
+"""The REACH front-end's contents as data: thesis tables A.1-A.3 and fig. 2.42.
+
+Which source sits behind which switch position, which rail drives which switch, which
+rails may be switched at all. Declared once here; the front-end model turns it into
+switch states, the simulated receiver reads it backwards to know what is connected, and
+a site file may override the source table when a deployment rewires the front-end.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+#: Number of positions of each single-pole switch (table A.2); 0 means released.
+SWITCH_POSITIONS: Mapping[str, int] = MappingProxyType({"ms1": 8, "ms2": 6, "ms3": 4, "ms4": 4})
+
+#: The transfer switch's two states: sources to the LNA, or sources and LNA to the VNA.
+MTS_STATES: tuple[str, str] = ("lna", "vna")
+
+#: The rail that drives each switch (table A.1: MS1 12 V, MS2 and MTS 24 V; MS3 and MS4
+#: are taken as 12 V parts, their model records being lost).
+SWITCH_RAIL: Mapping[str, str] = MappingProxyType(
+    {"ms1": "12v", "ms2": "24v", "ms3": "12v", "ms4": "12v", "mts": "24v"}
+)
+
+#: Rails the microcontroller may switch (table A.3, fig. 2.42); ``6v`` feeds the LNA.
+SWITCHABLE_RAILS: tuple[str, ...] = ("6v", "12v", "24v", "ns", "fan", "tec")
+
+#: Rails that are never switched: switching 5 V off loses the instrument (table A.3).
+FIXED_RAILS: tuple[str, ...] = ("3v3", "5v")
+
+#: MS2 positions (table A.2): the two VNA paths and the VNA's standards.
+MS2_TO_SOURCES = 1
+MS2_TO_LNA = 2
+VNA_STANDARDS: Mapping[str, int] = MappingProxyType(
+    {"short": 3, "open": 4, "load": 5, "test_load": 6}
+)
+
+
+@dataclass(frozen=True)
+class SourcePosition:
+    """Where a source sits: an MS1 position, and for cable-terminated ones MS3 or MS4 too."""
+
+    ms1: int
+    termination: tuple[str, int] | None = None
+
+    def switch_states(self) -> dict[str, int]:
+        """The single-pole switch positions that select this source (MS3/MS4 released otherwise)."""
+        states = {"ms1": self.ms1, "ms3": 0, "ms4": 0}
+        if self.termination is not None:
+            switch, position = self.termination
+            states[switch] = position
+        return states
+
+
+#: Table A.2 under REACH's source names (the names of REACH's HDF5 files).
+REACH_SOURCES: Mapping[str, SourcePosition] = MappingProxyType(
+    {
+        "ant": SourcePosition(1),
+        "hot": SourcePosition(2),
+        "ns": SourcePosition(3),
+        "cold": SourcePosition(4),
+        "r25": SourcePosition(5),
+        "r100": SourcePosition(6),
+        "c2r36": SourcePosition(7, ("ms3", 1)),
+        "c2r27": SourcePosition(7, ("ms3", 2)),
+        "c2r69": SourcePosition(7, ("ms3", 3)),
+        "c2r91": SourcePosition(7, ("ms3", 4)),
+        "c10open": SourcePosition(8, ("ms4", 1)),
+        "c10short": SourcePosition(8, ("ms4", 2)),
+        "c10r10": SourcePosition(8, ("ms4", 3)),
+        "c10r250": SourcePosition(8, ("ms4", 4)),
+    }
+)
+
+#: The Dicke cycle's references: the ambient 50 ohm load (thesis 2.1.1: the deployment
+#: used the ambient calibrator itself) and the NC346A noise diode.
+REFERENCE_LOAD = "cold"
+NOISE_SOURCE = "ns"
+
+#: TC-08 ports (thesis table 2.2); port 0 is the logger's cold junction.
+TC08_PORTS: Mapping[int, str] = MappingProxyType(
+    {
+        0: "cold_junction",
+        1: "ms1",
+        2: "hot",
+        3: "ms3",
+        4: "ms4",
+        5: "cable_2m",
+        6: "cable_10m",
+        7: "lna",
+        8: "antenna",
+    }
+)
+
+#: The TC-08 port whose reading is each source's physical temperature.
+SOURCE_THERMOCOUPLE: Mapping[str, int] = MappingProxyType(
+    {
+        "hot": 2,
+        "cold": 1,
+        "r25": 1,
+        "r100": 1,
+        "ns": 1,
+        "c2r27": 3,
+        "c2r36": 3,
+        "c2r69": 3,
+        "c2r91": 3,
+        "c10open": 4,
+        "c10short": 4,
+        "c10r10": 4,
+        "c10r250": 4,
+        "ant": 8,
+    }
+)
+
+
+def source_at(
+    ms1: int, ms3: int, ms4: int, sources: Mapping[str, SourcePosition] = REACH_SOURCES
+) -> str | None:
+    """The source that MS1/MS3/MS4 select, or ``None`` when nothing is connected."""
+    for name, place in sources.items():
+        if place.ms1 != ms1:
+            continue
+        if place.termination is None:
+            return name
+        switch, position = place.termination
+        if (ms3 if switch == "ms3" else ms4) == position:
+            return name
+    return None
