@@ -1,0 +1,117 @@
+"""The site file: where each instrument is reached, and what the front-end holds.
+
+A YAML mapping, safe-loaded, unknown keys rejected with the file and key named::
+
+    site: {name: REACH Karoo, longitude_deg: 21.52, latitude_deg: -30.97}
+    devices:
+      teensy: {port: /dev/serial/by-id/usb-Teensyduino_USB_Serial_12345-if00}
+      vna: {resource: "TCPIP0::192.168.10.20::5025::SOCKET", timeout_s: 20}
+      tec: {via: teensy}              # or {port: /dev/ttyUSB0}
+      tc08: {library: /opt/picotech/lib/libusbtc08.so}
+      spectrometer: {host: 0.0.0.0, port: 4660}
+
+``reach-sim`` prints one of these with the simulated instruments' addresses.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from reach_receiver.errors import ConfigError
+
+_SECTIONS = {"site", "devices"}
+_DEVICE_KEYS: Mapping[str, set[str]] = {
+    "teensy": {"port", "timeout_s"},
+    "vna": {"resource", "timeout_s"},
+    "tec": {"via", "port", "timeout_s"},
+    "tc08": {"library", "simulated", "mains_hz"},
+    "spectrometer": {"host", "port", "timeout_s"},
+}
+
+
+@dataclass(frozen=True)
+class SiteConfig:
+    """A parsed site file: the site's name and position, and one settings map per device."""
+
+    name: str = "unnamed site"
+    longitude_deg: float = 0.0
+    latitude_deg: float = 0.0
+    devices: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def device(self, name: str) -> Mapping[str, Any]:
+        """The settings of one device; a missing device is a :class:`ConfigError`."""
+        if name not in self.devices:
+            raise ConfigError(f"{self.source}: no 'devices.{name}' entry in the site file")
+        return self.devices[name]
+
+    def to_yaml(self) -> str:
+        """The site file text that reproduces this configuration."""
+        document = {
+            "site": {
+                "name": self.name,
+                "longitude_deg": self.longitude_deg,
+                "latitude_deg": self.latitude_deg,
+            },
+            "devices": {k: dict(v) for k, v in self.devices.items()},
+        }
+        return yaml.safe_dump(document, sort_keys=False)
+
+
+def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
+    """Check and convert a loaded site document; every mistake is reported at once."""
+    problems: list[str] = []
+    if not isinstance(document, dict):
+        raise ConfigError(f"{source}: a site file is a mapping with 'site' and 'devices'")
+    problems += [f"unknown section '{k}'" for k in document if k not in _SECTIONS]
+    site = document.get("site") or {}
+    devices = document.get("devices") or {}
+    if not isinstance(site, dict):
+        problems.append("'site' must be a mapping")
+        site = {}
+    if not isinstance(devices, dict):
+        problems.append("'devices' must be a mapping")
+        devices = {}
+    for key in site:
+        if key not in ("name", "longitude_deg", "latitude_deg"):
+            problems.append(f"unknown key 'site.{key}'")
+    for name, settings in devices.items():
+        if name not in _DEVICE_KEYS:
+            problems.append(f"unknown device 'devices.{name}'; known: {', '.join(_DEVICE_KEYS)}")
+            continue
+        if not isinstance(settings, dict):
+            problems.append(f"'devices.{name}' must be a mapping")
+            continue
+        problems += [
+            f"unknown key 'devices.{name}.{k}'" for k in settings if k not in _DEVICE_KEYS[name]
+        ]
+    try:
+        longitude = float(site.get("longitude_deg", 0.0))
+        latitude = float(site.get("latitude_deg", 0.0))
+    except (TypeError, ValueError):
+        problems.append("'site.longitude_deg' and 'site.latitude_deg' must be numbers")
+        longitude = latitude = 0.0
+    if problems:
+        raise ConfigError(f"{source}: " + "; ".join(problems))
+    return SiteConfig(
+        name=str(site.get("name", "unnamed site")),
+        longitude_deg=longitude,
+        latitude_deg=latitude,
+        devices={k: dict(v) for k, v in devices.items()},
+        source=source,
+    )
+
+
+def load_site(path: str | Path) -> SiteConfig:
+    """Read a site file."""
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as err:
+        raise ConfigError(f"{path}: cannot read site file: {err}") from err
+    return parse_site(document, str(path))
