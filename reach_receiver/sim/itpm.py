@@ -1,0 +1,301 @@
+"""Simulated iTPM spectrometer: encodes spectra as SPEAD packets and streams them over UDP.
+
+The wire format is the one :mod:`reach_receiver.devices.spead` decodes (its module doc
+lists what was confirmed against REACH's and SKA's code and what was assumed). Every
+``period_s`` of the clock's time the simulator asks its spectrum source for the power
+spectrum integrated over the period just ended, stamps it with the period's start, and
+sends its packets to the receiver's address, as the iTPM does once per integration.
+
+Faults can be switched at run time (:meth:`ItpmSimulator.set_faults`): lost, duplicated
+or reordered packets, garbage datagrams, and a stall (nothing sent). They are drawn from
+one seeded generator, so a test's packet losses are reproducible.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import socket
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from reach_receiver.clock import Clock
+from reach_receiver.devices import spead
+
+logger = logging.getLogger(__name__)
+
+SpectrumSource = Callable[[float, float], np.ndarray]
+"""``source(t_start, duration_s) -> (n_inputs, n_channels)`` power integrated over the span."""
+
+_PACKET = np.dtype([("header", ">u8", (1 + spead.N_ITEMS,)), ("payload", "V1024")])
+
+
+def encode_spectrum(
+    spectrum: np.ndarray,
+    timestamp: int,
+    heap_counter: int,
+    sync_time: int,
+    *,
+    floating_point: bool = True,
+    buffer_id: int = 0,
+) -> list[bytes]:
+    """Encode one (n_inputs, n_channels) spectrum as the iTPM's SPEAD datagrams.
+
+    Values are placed in the heap in the firmware's order (the inverse of the
+    receiver's :func:`~reach_receiver.devices.spead.physical_index` map), written as
+    little-endian float64 (or int64 in integer mode), 128 per 1024-byte packet. Packet
+    ``p`` of ``2 x k`` carries FPGA row ``p // k``: start signal ``(p // k) x s`` and
+    start channel ``(p % k) x 128 / s`` with ``s = n_inputs // 2`` signals per FPGA.
+
+    Parameters
+    ----------
+    spectrum
+        Power per input and channel, physical channel order.
+    timestamp
+        Spectrum time in 32768 x 2.5 ns counts after ``sync_time`` (48 bits).
+    heap_counter
+        Per-spectrum counter; its low 24 bits go in bits 0-23 of item 0x0001 and the
+        packet's index in the heap in bits 24-39 (an assumption: see the spead module).
+    sync_time
+        Unix seconds of the firmware's time sync.
+    floating_point
+        Float64 payload and mode bit 7, else int64 payload (values rounded).
+    buffer_id
+        Value of bits 16-31 of item 0x2001.
+
+    Returns
+    -------
+    list of bytes
+        One 1096-byte datagram per packet, in sending order.
+    """
+    n_inputs, n_channels = spectrum.shape
+    per_fpga = spead.signals_per_fpga(n_inputs)
+    per_packet = spead.PAYLOAD_BYTES // spead.VALUE_BYTES
+    if (n_inputs * n_channels) % (2 * per_packet):
+        raise ValueError(f"{n_inputs} x {n_channels} values do not fill whole packets")
+    index = spead.physical_index(n_inputs, n_channels, floating_point)
+    heap = np.asarray(spectrum).reshape(-1)[index]
+    wire = heap.astype("<f8") if floating_point else np.rint(heap).astype("<i8")
+    n_packets = wire.size // per_packet
+    per_row = n_packets // 2
+    p = np.arange(n_packets, dtype=np.uint64)
+    start_signal = (p // per_row) * per_fpga
+    start_channel = (p % per_row) * (per_packet // per_fpga)
+    info = (
+        (start_channel << 24)
+        | ((per_packet // per_fpga) << 16)
+        | (start_signal << 8)
+        | np.uint64(per_fpga)
+    )
+    mode = spead.SIMULATED_MODE | (spead.MODE_FLOATING_POINT if floating_point else 0)
+    packets = np.zeros(n_packets, dtype=_PACKET)
+    header = packets["header"]
+    header[:, 0] = spead.HEADER_WORD
+    header[:, 1] = (
+        (int(spead.IMMEDIATE | spead.HEAP_COUNTER) << 48) | (p << 24) | (heap_counter & 0xFFFFFF)
+    )
+    header[:, 2] = (int(spead.IMMEDIATE | spead.PAYLOAD_LENGTH) << 48) | spead.PAYLOAD_BYTES
+    header[:, 3] = (int(spead.IMMEDIATE | spead.SYNC_TIME) << 48) | (sync_time & spead.VALUE_MASK)
+    header[:, 4] = (int(spead.IMMEDIATE | spead.TIMESTAMP) << 48) | (timestamp & spead.VALUE_MASK)
+    header[:, 5] = (int(spead.IMMEDIATE | spead.MODE) << 48) | mode
+    header[:, 6] = (int(spead.IMMEDIATE | spead.CHANNEL_INFO) << 48) | info
+    header[:, 7] = (int(spead.IMMEDIATE | spead.BUFFER_ID) << 48) | ((buffer_id & 0xFFFF) << 16)
+    header[:, 8] = int(spead.PAYLOAD_OFFSET) << 48
+    packets["payload"] = wire.view("V1024")
+    blob = packets.tobytes()
+    size = spead.PACKET_BYTES
+    return [blob[k * size : (k + 1) * size] for k in range(n_packets)]
+
+
+@dataclass(frozen=True)
+class ItpmFaults:
+    """Faults the simulator injects, per spectrum sent.
+
+    Parameters
+    ----------
+    drop_fraction
+        Probability that each packet is not sent.
+    duplicate_fraction
+        Probability that each sent packet is sent twice (the copy right after it).
+    reorder
+        Shuffle the packets of each spectrum (they stay within their heap).
+    garbage_fraction
+        Expected garbage datagrams per packet: random bytes or truncated packets.
+    stall
+        Send nothing at all (a hung firmware or a pulled cable).
+    """
+
+    drop_fraction: float = 0.0
+    duplicate_fraction: float = 0.0
+    reorder: bool = False
+    garbage_fraction: float = 0.0
+    stall: bool = False
+
+
+@dataclass
+class ItpmSimulatorStats:
+    """What the simulator did: spectra and packets sent, and faults injected."""
+
+    spectra_sent: int = 0
+    packets_sent: int = 0
+    packets_dropped: int = 0
+    packets_duplicated: int = 0
+    garbage_sent: int = 0
+
+
+class ItpmSimulator:
+    """A thread that streams one spectrum every ``period_s`` of clock time over UDP.
+
+    Parameters
+    ----------
+    spectrum_source
+        ``source(t_start, duration_s)`` -> (n_inputs, n_channels) power spectrum
+        integrated over ``[t_start, t_start + duration_s)`` of the clock's time.
+    clock
+        Shared with the receiver; a :class:`~reach_receiver.clock.CompressedClock`
+        makes a 1 s integration take ``1 / factor`` real seconds.
+    address
+        The receiver's (host, port).
+    period_s
+        Integration time of one spectrum, clock seconds.
+    faults
+        Initial faults (none by default); change them with :meth:`set_faults`.
+    seed
+        Seed of the generator the faults are drawn from.
+    floating_point
+        Float64 payload (REACH's firmware setting) or int64.
+    """
+
+    def __init__(
+        self,
+        spectrum_source: SpectrumSource,
+        clock: Clock,
+        address: tuple[str, int],
+        period_s: float = 1.0,
+        faults: ItpmFaults | None = None,
+        *,
+        seed: int = 0,
+        floating_point: bool = True,
+    ) -> None:
+        if not period_s > 0:
+            raise ValueError(f"period_s must be positive, got {period_s}")
+        self.source = spectrum_source
+        self.clock = clock
+        self.address = address
+        self.period_s = float(period_s)
+        self.floating_point = floating_point
+        self.stats = ItpmSimulatorStats()
+        self._faults = faults or ItpmFaults()
+        self._rng = np.random.default_rng(seed)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+        self.error: BaseException | None = None
+
+    @property
+    def faults(self) -> ItpmFaults:
+        """The faults in force."""
+        return self._faults
+
+    def set_faults(self, **changes: float | bool) -> ItpmFaults:
+        """Change some faults (fields of :class:`ItpmFaults`), from the next spectrum on."""
+        self._faults = dataclasses.replace(self._faults, **changes)  # type: ignore[arg-type]
+        return self._faults
+
+    def start(self) -> None:
+        """Open the sending socket and start streaming."""
+        if self._thread is not None:
+            return
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 * 1024 * 1024)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="itpm-simulator", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop streaming, join the thread and close the socket."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                logger.error("iTPM simulator thread did not stop within %g s", timeout_s)
+            self._thread = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> ItpmSimulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def _wait_until(self, t: float) -> bool:
+        """Sleep in clock time until ``t``; False when asked to stop first."""
+        while not self._stop.is_set():
+            remaining = t - self.clock.now()
+            if remaining <= 0:
+                return True
+            self.clock.sleep(min(remaining, self.period_s / 8))
+        return False
+
+    def _run(self) -> None:
+        now = self.clock.now()
+        sync_time = int(now)
+        t_start = now
+        heap_counter = 0
+        try:
+            while self._wait_until(t_start + self.period_s):
+                spectrum = np.asarray(self.source(t_start, self.period_s), dtype=float)
+                timestamp = round((t_start - sync_time) / spead.TIMESTAMP_UNIT_S)
+                faults = self._faults
+                if not faults.stall:
+                    packets = encode_spectrum(
+                        spectrum,
+                        timestamp,
+                        heap_counter,
+                        sync_time,
+                        floating_point=self.floating_point,
+                    )
+                    self._send(packets, faults)
+                    self.stats.spectra_sent += 1
+                heap_counter += 1
+                t_start += self.period_s
+        except Exception as err:  # the thread must not die silently
+            logger.exception("iTPM simulator stopped")
+            self.error = err
+
+    def _send(self, packets: list[bytes], faults: ItpmFaults) -> None:
+        rng = self._rng
+        n = len(packets)
+        order = rng.permutation(n) if faults.reorder else np.arange(n)
+        keep = rng.random(n) >= faults.drop_fraction
+        twice = rng.random(n) < faults.duplicate_fraction
+        garbage = rng.poisson(faults.garbage_fraction, n) if faults.garbage_fraction else None
+        sock = self._sock
+        if sock is None:
+            return
+        for k in order:
+            if garbage is not None:
+                for _ in range(garbage[k]):
+                    sock.sendto(self._garbage(packets[k]), self.address)
+                    self.stats.garbage_sent += 1
+            if not keep[k]:
+                self.stats.packets_dropped += 1
+                continue
+            sock.sendto(packets[k], self.address)
+            self.stats.packets_sent += 1
+            if twice[k]:
+                sock.sendto(packets[k], self.address)
+                self.stats.packets_duplicated += 1
+
+    def _garbage(self, packet: bytes) -> bytes:
+        """Random bytes, or a real packet cut short (a truncated or foreign datagram)."""
+        rng = self._rng
+        if rng.random() < 0.5:
+            return bytes(packet[: int(rng.integers(1, len(packet)))])
+        return rng.bytes(int(rng.integers(1, 2 * len(packet))))
