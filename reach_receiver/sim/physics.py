@@ -110,7 +110,7 @@ class ReceiverPhysics:
         self._theta = self.truth.theta(self._model_freq)
         self._gain = self.truth.gain(self._model_freq)
         self._offset = self.truth.offset_k(self._model_freq)
-        self._enr_k = enr_noise_temperature(self._model_freq)
+        self._enr_k = self.enr_k(self._model_freq)
         self._rng = np.random.default_rng(self.config.seed)
         self._lock = threading.Lock()
         self._pins: dict[str, str] = {}
@@ -268,7 +268,7 @@ class ReceiverPhysics:
         rec_match = 1.0 - np.abs(gamma_rec) ** 2
         gamma_ref = self.reflection(REFERENCE_LOAD, f)
         p_ref, _, _ = dicke_powers(theta, gamma_ref, gamma_rec, self.enclosure_k(), gain, offset)
-        t_ns = self.enclosure_k() + enr_noise_temperature(f)
+        t_ns = self.enclosure_k() + self.enr_k(f)
         zero = np.zeros(f.shape, dtype=complex)
         p_ns, _, _ = dicke_powers(theta, zero, gamma_rec, t_ns, gain, offset)
         t_l = (p_ref / gain - offset) / rec_match
@@ -276,6 +276,22 @@ class ReceiverPhysics:
         effective[4] = t_l
         effective[3] = (p_ns / gain - offset) / rec_match - t_l
         return effective
+
+    def enr_k(self, freq_hz: FloatArray) -> FloatArray:
+        """The noise diode's excess temperature: a cubic through table 2.1's ENR (eq. 2.1).
+
+        A real diode's output is smooth; the table's straight-line interpolation between
+        its 10 MHz points would put kinks into the spectrum that no diode has.
+        """
+        band = np.linspace(self.config.f_lo_hz, self.config.f_hi_hz, 200)
+        span = self.config.f_hi_hz - self.config.f_lo_hz
+        centre = self.config.f_lo_hz + self.config.f_hi_hz
+
+        def x(f: FloatArray) -> FloatArray:
+            return np.asarray((2 * np.asarray(f) - centre) / span, dtype=float)
+
+        coefficients = np.polynomial.legendre.legfit(x(band), enr_noise_temperature(band), 3)
+        return np.asarray(np.polynomial.legendre.legval(x(freq_hz), coefficients), dtype=float)
 
     def thermocouple_of(self, source: str) -> int:
         """The TC-08 port that measures ``source``'s temperature (table 2.2)."""

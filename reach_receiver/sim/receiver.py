@@ -1,0 +1,185 @@
+"""The whole simulated receiver: one physical model behind five instruments on real transports.
+
+================  =======================================  ===============================
+instrument        simulator                                transport the driver uses
+================  =======================================  ===============================
+Teensy 3.5        the firmware's host build                pseudo-terminal (pyserial)
+TEC controller    :class:`~.tec.TecSimulator`              pty on the Teensy's UART1, or
+                                                           its own pty
+VNA               :class:`~.vna.VnaSimulator`              TCP SCPI socket (pyvisa-py)
+spectrometer      :class:`~.itpm.ItpmSimulator`            UDP datagrams
+TC-08             :class:`~.tc08_standin.Tc08StandIn`      a stand-in ``libusbtc08.so``
+================  =======================================  ===============================
+
+Every simulator reads the same :class:`~.physics.ReceiverPhysics`: the firmware's pin
+changes tell it which way the switches point, the TEC's plate is the enclosure's
+temperature, and the VNA and the spectrometer see whatever the switches connect. All
+share one clock, compressed in dry runs so that hours of integration take seconds while
+the spectra carry the radiometer noise of hours.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from reach_receiver.clock import Clock, CompressedClock
+from reach_receiver.sim.itpm import ItpmSimulator
+from reach_receiver.sim.physics import PhysicsConfig, ReceiverPhysics
+from reach_receiver.sim.tc08_standin import Tc08StandIn
+from reach_receiver.sim.tec import TecSimulator
+from reach_receiver.sim.teensy_firmware import FirmwareTeensy
+from reach_receiver.sim.vna import VnaSimulator
+from reach_receiver.site import SiteConfig
+
+log = logging.getLogger(__name__)
+
+#: Simulated seconds per real second of a dry run: an hour of integration in 1.2 s.
+DEFAULT_COMPRESSION = 3000.0
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """How the simulated receiver runs.
+
+    ``spectrum_period_s`` is the iTPM's integration per spectrum (simulated seconds): long
+    periods keep the packet rate low at high compression without changing the noise of
+    an integration, which depends only on its total duration.
+    """
+
+    compression: float = DEFAULT_COMPRESSION
+    spectrum_period_s: float = 30.0
+    seed: int = 0
+    ambient_c: float = 25.0
+    enclosure_start_c: float | None = None
+    tec_tau_s: float = 600.0
+    vna_drift_per_hour: float = 0.001
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+
+
+def free_udp_port(host: str = "127.0.0.1") -> int:
+    """A UDP port nobody is bound to right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind((host, 0))
+        return int(probe.getsockname()[1])
+
+
+class SimulatedReceiver:
+    """Starts, wires and stops every simulated instrument.
+
+    Parameters
+    ----------
+    settings
+        Simulation settings.
+    clock
+        The shared clock; a :class:`CompressedClock` at ``settings.compression`` by default.
+    spectrometer_port
+        UDP port the spectra are sent to (where the spectrometer driver listens); a free
+        one by default.
+    workdir
+        Where the TC-08 stand-in library is built; a temporary directory by default.
+    """
+
+    def __init__(
+        self,
+        settings: SimulationSettings | None = None,
+        clock: Clock | None = None,
+        spectrometer_port: int | None = None,
+        workdir: Path | None = None,
+    ) -> None:
+        self.settings = settings or SimulationSettings()
+        self.clock = clock or CompressedClock(self.settings.compression)
+        self.spectrometer_address = ("127.0.0.1", spectrometer_port or free_udp_port())
+        self._tmp = None if workdir else tempfile.TemporaryDirectory(prefix="reach-sim-")
+        self.workdir = workdir or Path(self._tmp.name if self._tmp else ".")
+        s = self.settings
+        self.tec = TecSimulator(
+            self.clock,
+            ambient_c=s.ambient_c,
+            tau_s=s.tec_tau_s,
+            initial_c=s.enclosure_start_c,
+        )
+        self.physics = ReceiverPhysics(self.clock, s.physics, enclosure_c=self.tec.temperature_c)
+        self.vna = VnaSimulator(
+            self.physics.reflection_at_vna,
+            self.clock,
+            seed=s.seed,
+            drift_rate_per_s=s.vna_drift_per_hour / 3600.0,
+        )
+        self.itpm = ItpmSimulator(
+            self.physics.spectrum,
+            self.clock,
+            self.spectrometer_address,
+            period_s=s.spectrum_period_s,
+            seed=s.seed,
+        )
+        self.teensy: FirmwareTeensy | None = None
+        self.tc08: Tc08StandIn | None = None
+        self._started = False
+
+    def start(self) -> SiteConfig:
+        """Start every simulator; return the site configuration that reaches them."""
+        tec_port = self.tec.start()
+        self.teensy = FirmwareTeensy(uart1=tec_port)
+        self.teensy.start()
+        self.teensy.on_change(self.physics.update_pins)
+        self.physics.update_pins(self.teensy.state)
+        for address, celsius in self.physics.mcp9808_c().items():
+            self.teensy.set_sensor(address, celsius)
+        self.vna.start()
+        self.itpm.start()
+        self.tc08 = Tc08StandIn(self.workdir / "tc08", self.physics.thermocouples_c, self.clock)
+        self.tc08.start()
+        self._started = True
+        log.info("simulated receiver started: %s", self.site().devices)
+        return self.site()
+
+    def site(self) -> SiteConfig:
+        """The site configuration of the running simulators."""
+        if self.teensy is None or self.tc08 is None:
+            raise RuntimeError("the simulated receiver is not started")
+        host, port = self.spectrometer_address
+        return SiteConfig(
+            name="simulated receiver",
+            longitude_deg=21.52,
+            latitude_deg=-30.97,
+            devices={
+                "teensy": {"port": self.teensy.port},
+                "tec": {"via": "teensy"},
+                "vna": {"resource": self.vna.address},
+                "tc08": {"library": str(self.tc08.library)},
+                "spectrometer": {"host": host, "port": port},
+            },
+            source="reach-sim",
+        )
+
+    def close(self) -> None:
+        """Stop every simulator (in reverse order of start) and remove temporary files."""
+        for stop in (
+            self.tc08.close if self.tc08 else None,
+            self.itpm.stop,
+            self.vna.close,
+            self.teensy.close if self.teensy else None,
+            self.tec.stop,
+        ):
+            if stop is None:
+                continue
+            try:
+                stop()
+            except Exception:  # a stop that fails must not keep the others running
+                log.exception("stopping a simulator failed")
+        self.teensy = None
+        self.tc08 = None
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def __enter__(self) -> SimulatedReceiver:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
