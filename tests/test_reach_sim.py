@@ -1,0 +1,57 @@
+"""``reach-sim`` as its own process: the site file it prints reaches every instrument."""
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from reach_receiver.clock import SystemClock
+from reach_receiver.devices.spectrometer import Spectrometer
+from reach_receiver.devices.tc08 import Tc08
+from reach_receiver.devices.teensy import Teensy
+from reach_receiver.devices.vna import Vna
+from reach_receiver.sim.receiver import free_udp_port
+from reach_receiver.site import load_site
+from reach_receiver.transports.tc08_library import load_libusbtc08
+
+
+@pytest.fixture
+def reach_sim(tmp_path):
+    site_file = tmp_path / "site.yaml"
+    port = free_udp_port()
+    entry = "from reach_receiver.cli import sim_main; raise SystemExit(sim_main())"
+    options = ["--site-out", str(site_file), "--spectrometer-port", str(port)]
+    process = subprocess.Popen(
+        [sys.executable, "-c", entry, *options, "--spectrum-period", "60"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while not site_file.exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    yield process, site_file
+    if process.poll() is None:
+        process.kill()
+    process.communicate(timeout=10)
+
+
+def test_reach_sim_serves_its_site_file_and_stops_cleanly(reach_sim):
+    process, site_file = reach_sim
+    assert site_file.exists(), process.stderr.read() if process.poll() is not None else "no site"
+    site = load_site(site_file)
+    clock = SystemClock()
+    with Teensy(site.device("teensy")["port"]) as teensy:
+        assert teensy.read_state().boot == "por"
+    with Vna(site.device("vna")["resource"]) as vna:
+        assert "TR1300" in vna.connect()
+    spectrometer = site.device("spectrometer")
+    with Spectrometer((spectrometer["host"], spectrometer["port"]), clock=clock) as itpm:
+        spectrum = itpm.read_spectrum(timeout_s=10.0)
+        assert spectrum.data.shape == (2, 16384)
+    with Tc08(load_libusbtc08(site.device("tc08")["library"]), clock) as tc08:
+        assert 20.0 < tc08.read().temperatures_c[1] < 30.0
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=20) == 0
