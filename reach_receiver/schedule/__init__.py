@@ -1,0 +1,1 @@
+"""Schedules: YAML operations lists compiled into checked steps, and their runner."""
