@@ -6,7 +6,9 @@ another major version is refused; a run file without it is read as REACH-native)
 synced and moved over the target (:func:`os.replace`). Errors name the file and what is
 wrong (:class:`FileFormatError`) or the file and the source (:class:`InvalidDataError`).
 
-Run files (``format = "reach-calibration-run"``) use the layout of REACH's own tools::
+Run files (``format = "reach-calibration-run"``, or ``"reach-receiver-run"`` for the run files
+of :mod:`reach_receiver.store`, which add their own groups beside this layout) use the
+layout of REACH's own tools::
 
     /observation_data/frequencies              (n,) float, Hz
     /observation_data/lna_s11                  (n,) complex: receiver reflection
@@ -65,6 +67,9 @@ from .solution import CalibratedSpectrum, Solution
 PathLike = str | os.PathLike[str]
 FORMAT_VERSION = "1.0"
 RUN_FORMAT = "reach-calibration-run"
+#: The receiver's run files (``reach_receiver.store``): this run layout plus their own groups.
+RECEIVER_RUN_FORMAT = "reach-receiver-run"
+RUN_FORMATS = (RUN_FORMAT, RECEIVER_RUN_FORMAT)
 SOLUTION_FORMAT = "reach-calibration-solution"
 CALIBRATED_FORMAT = "reach-calibrated-spectrum"
 POWER_UNITS = "arbitrary (spectrometer power)"
@@ -122,8 +127,9 @@ def _dataset(group: Any, name: str, value: ArrayLike, units: str) -> Any:
 
 
 @contextlib.contextmanager
-def _open(path: PathLike, file_format: str) -> Iterator[Any]:
-    """Open ``path`` for reading and check its ``format`` and ``format_version``."""
+def _open(path: PathLike, file_format: str | tuple[str, ...]) -> Iterator[Any]:
+    """Open ``path`` for reading and check its ``format`` (one of ``file_format``) and version."""
+    formats = (file_format,) if isinstance(file_format, str) else file_format
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(2, "no such file", str(p))
@@ -133,10 +139,11 @@ def _open(path: PathLike, file_format: str) -> Iterator[Any]:
         raise FileFormatError(f"{p}: not a readable HDF5 file ({err})") from err
     with f:
         found = f.attrs.get("format")
-        if found is not None and _as_str(found) != file_format:
-            raise FileFormatError(f"{p}: is a {_as_str(found)!r} file, expected {file_format!r}")
+        if found is not None and _as_str(found) not in formats:
+            expected = " or ".join(repr(k) for k in formats)
+            raise FileFormatError(f"{p}: is a {_as_str(found)!r} file, expected {expected}")
         version = f.attrs.get("format_version")
-        if version is None and file_format != RUN_FORMAT:
+        if version is None and RUN_FORMAT not in formats:
             raise FileFormatError(f"{p}: no 'format_version' attribute at the root")
         if version is not None and _as_str(version).split(".")[0] != _MAJOR:
             raise FileFormatError(
@@ -281,7 +288,7 @@ def read_run(path: PathLike) -> tuple[CalibrationData, dict[str, SourceData]]:
 
     2-D spectra are averaged over their first axis (module docstring).
     """
-    with _open(path, RUN_FORMAT) as f:
+    with _open(path, RUN_FORMATS) as f:
         obs = _group(f, "observation_data", path)
         meta = _group(f, "observation_metadata", path)
         temps = _group(meta, "temperatures", path)
@@ -327,7 +334,7 @@ def _orders(value: NDArray[Any], path: PathLike) -> Orders:
 
 def read_truth(path: PathLike) -> ReceiverTruth | None:
     """Read the simulated receiver of a run file (``None`` for a measured run)."""
-    with _open(path, RUN_FORMAT) as f:
+    with _open(path, RUN_FORMATS) as f:
         if "simulation_truth" not in f:
             return None
         g = _group(f, "simulation_truth", path)
@@ -342,63 +349,73 @@ def read_truth(path: PathLike) -> ReceiverTruth | None:
 
 def write_solution(path: PathLike, solution: Solution) -> None:
     """Write a :class:`Solution` (atomically); :func:`read_solution` restores it exactly."""
-    post, basis = solution.posterior, solution.basis
     with _atomic_h5(path, SOLUTION_FORMAT) as f:
-        f.attrs.update({"method": solution.method, "measurement_model": solution.measurement_model})
-        f.attrs.update({"calibrators": list(solution.calibrators)})
-        f.attrs["metadata"] = _json(solution.metadata)
-        b = f.create_group("basis")
-        b.attrs.update({"kind": basis.kind, "f_lo_hz": basis.f_lo_hz, "f_hi_hz": basis.f_hi_hz})
-        g = f.create_group("posterior")
-        g.attrs.update({k: float(getattr(post, k)) for k in _POSTERIOR_FLOATS})
-        g.attrs.update({"n_rows": int(post.n_rows), "parameters": list(PARAMETERS)})
-        g.attrs["noise_variance_units"] = (
-            "K^2" if solution.measurement_model == "homoscedastic" else "1 (scale of var Q)"
-        )
-        _dataset(g, "orders", np.asarray(post.orders, dtype=np.int64), "terms")
-        _dataset(g, "mean", post.mean, "K")
-        _dataset(g, "scale", post.scale, "K^2")
-        table = solution.evidence_table
-        ev = f.create_group("evidence")
-        rows = np.array(list(table), dtype=np.int64).reshape(len(table), N_PARAMETERS)
-        _dataset(ev, "orders", rows, "terms")
-        _dataset(ev, "log_evidence", np.array(list(table.values()), dtype=float), "nats")
+        write_solution_group(f, solution)
+
+
+def write_solution_group(f: Any, solution: Solution) -> None:
+    """Write a solution's layout (module docstring) into an open HDF5 file or group ``f``."""
+    post, basis = solution.posterior, solution.basis
+    f.attrs.update({"method": solution.method, "measurement_model": solution.measurement_model})
+    f.attrs.update({"calibrators": list(solution.calibrators)})
+    f.attrs["metadata"] = _json(solution.metadata)
+    b = f.create_group("basis")
+    b.attrs.update({"kind": basis.kind, "f_lo_hz": basis.f_lo_hz, "f_hi_hz": basis.f_hi_hz})
+    g = f.create_group("posterior")
+    g.attrs.update({k: float(getattr(post, k)) for k in _POSTERIOR_FLOATS})
+    g.attrs.update({"n_rows": int(post.n_rows), "parameters": list(PARAMETERS)})
+    g.attrs["noise_variance_units"] = (
+        "K^2" if solution.measurement_model == "homoscedastic" else "1 (scale of var Q)"
+    )
+    _dataset(g, "orders", np.asarray(post.orders, dtype=np.int64), "terms")
+    _dataset(g, "mean", post.mean, "K")
+    _dataset(g, "scale", post.scale, "K^2")
+    table = solution.evidence_table
+    ev = f.create_group("evidence")
+    rows = np.array(list(table), dtype=np.int64).reshape(len(table), N_PARAMETERS)
+    _dataset(ev, "orders", rows, "terms")
+    _dataset(ev, "log_evidence", np.array(list(table.values()), dtype=float), "nats")
 
 
 def read_solution(path: PathLike) -> Solution:
     """Read a solution written by :func:`write_solution`."""
     with _open(path, SOLUTION_FORMAT) as f:
-        basis = _basis(_group(f, "basis", path), path)
-        g = _group(f, "posterior", path)
-        orders = _orders(_array(g, "orders", path), path)
-        mean = _array(g, "mean", path).astype(float)
-        scale = _array(g, "scale", path).astype(float)
-        n = sum(orders)
-        if mean.shape != (n,) or scale.shape != (n, n):
-            raise FileFormatError(f"{path}: posterior mean/scale do not match orders {orders}")
-        dof, logz, noise, chi2 = (float(_attr(g, k, path)) for k in _POSTERIOR_FLOATS)
-        posterior = LinearPosterior(
-            orders, mean, scale, dof, logz, noise, chi2, int(_attr(g, "n_rows", path))
-        )
-        ev = _group(f, "evidence", path)
-        ev_orders = _array(ev, "orders", path)
-        ev_logz = _array(ev, "log_evidence", path).astype(float)
-        if ev_orders.shape != (ev_logz.size, N_PARAMETERS):
-            raise FileFormatError(f"{path}: evidence orders {ev_orders.shape} vs log_evidence")
-        table = {_orders(o, path): float(z) for o, z in zip(ev_orders, ev_logz, strict=True)}
-        model = _as_str(_attr(f, "measurement_model", path))
-        if model not in ("radiometer", "homoscedastic"):
-            raise FileFormatError(f"{path}: unknown measurement_model {model!r}")
-        method, calibrators = _as_str(_attr(f, "method", path)), _names(f, "calibrators")
-        return Solution(
-            method,
-            basis,
-            posterior,
-            "radiometer" if model == "radiometer" else "homoscedastic",
-            table,
-            tuple(calibrators or ()),
-            _metadata(f, path),
-        )
+        return read_solution_group(f, path)
+
+
+def read_solution_group(f: Any, path: PathLike) -> Solution:
+    """Read a solution from the open HDF5 file or group ``f``; errors name ``path``."""
+    basis = _basis(_group(f, "basis", path), path)
+    g = _group(f, "posterior", path)
+    orders = _orders(_array(g, "orders", path), path)
+    mean = _array(g, "mean", path).astype(float)
+    scale = _array(g, "scale", path).astype(float)
+    n = sum(orders)
+    if mean.shape != (n,) or scale.shape != (n, n):
+        raise FileFormatError(f"{path}: posterior mean/scale do not match orders {orders}")
+    dof, logz, noise, chi2 = (float(_attr(g, k, path)) for k in _POSTERIOR_FLOATS)
+    posterior = LinearPosterior(
+        orders, mean, scale, dof, logz, noise, chi2, int(_attr(g, "n_rows", path))
+    )
+    ev = _group(f, "evidence", path)
+    ev_orders = _array(ev, "orders", path)
+    ev_logz = _array(ev, "log_evidence", path).astype(float)
+    if ev_orders.shape != (ev_logz.size, N_PARAMETERS):
+        raise FileFormatError(f"{path}: evidence orders {ev_orders.shape} vs log_evidence")
+    table = {_orders(o, path): float(z) for o, z in zip(ev_orders, ev_logz, strict=True)}
+    model = _as_str(_attr(f, "measurement_model", path))
+    if model not in ("radiometer", "homoscedastic"):
+        raise FileFormatError(f"{path}: unknown measurement_model {model!r}")
+    method, calibrators = _as_str(_attr(f, "method", path)), _names(f, "calibrators")
+    return Solution(
+        method,
+        basis,
+        posterior,
+        "radiometer" if model == "radiometer" else "homoscedastic",
+        table,
+        tuple(calibrators or ()),
+        _metadata(f, path),
+    )
 
 
 def write_calibrated(
