@@ -81,3 +81,47 @@ def sim_main(argv: Sequence[str] | None = None) -> int:
         print(f"reach-sim: {err}", file=sys.stderr)
         return 1
     return 0
+
+
+# ------------------------------------------------------------------------------- reach-run
+def _run_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="reach-run",
+        description="Check and run a YAML schedule against the receiver (a site file) or the "
+        "simulated receiver (--sim).",
+    )
+    parser.add_argument("schedule", type=Path, help="the schedule, e.g. schedules/calibrate.yaml")
+    target = parser.add_mutually_exclusive_group()
+    target.add_argument("--site", type=Path, help="site file of the real instrument")
+    target.add_argument(
+        "--sim", action="store_true", help="run against the simulated receiver, in-process"
+    )
+    parser.add_argument(
+        "--validate", action="store_true", help="check the schedule, print its duration, exit"
+    )
+    parser.add_argument(
+        "--dry-run", action="store_true", help="print the step list and its timing, exit"
+    )
+    parser.add_argument("--out", type=Path, default=Path("runs"), help="directory of run files")
+    parser.add_argument(
+        "--compression",
+        type=float,
+        default=DEFAULT_COMPRESSION,
+        help=f"--sim: simulated seconds per real second (default {DEFAULT_COMPRESSION:g})",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every action")
+    return parser
+
+
+def run_main(argv: Sequence[str] | None = None) -> int:
+    """``reach-run``: validate, then run a schedule; exit 0 only if it completed."""
+    from reach_receiver.runcli import run_command
+
+    args = _run_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(asctime)s %(name)s: %(message)s",
+    )
+    return run_command(args)

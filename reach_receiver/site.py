@@ -9,6 +9,7 @@ A YAML mapping, safe-loaded, unknown keys rejected with the file and key named::
       tec: {via: teensy}              # or {port: /dev/ttyUSB0}
       tc08: {library: /opt/picotech/lib/libusbtc08.so}
       spectrometer: {host: 0.0.0.0, port: 4660}
+    references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
 
 ``reach-sim`` prints one of these with the simulated instruments' addresses.
 """
@@ -24,13 +25,13 @@ import yaml
 
 from reach_receiver.errors import ConfigError
 
-_SECTIONS = {"site", "devices"}
+_SECTIONS = {"site", "devices", "references"}
 _DEVICE_KEYS: Mapping[str, set[str]] = {
     "teensy": {"port", "timeout_s"},
     "vna": {"resource", "timeout_s"},
     "tec": {"via", "port", "timeout_s"},
     "tc08": {"library", "simulated", "mains_hz"},
-    "spectrometer": {"host", "port", "timeout_s"},
+    "spectrometer": {"host", "port", "timeout_s", "period_s"},
 }
 
 
@@ -42,6 +43,7 @@ class SiteConfig:
     longitude_deg: float = 0.0
     latitude_deg: float = 0.0
     devices: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    references: Mapping[str, str] = field(default_factory=dict)
     source: str = "<memory>"
 
     def device(self, name: str) -> Mapping[str, Any]:
@@ -52,7 +54,7 @@ class SiteConfig:
 
     def to_yaml(self) -> str:
         """The site file text that reproduces this configuration."""
-        document = {
+        document: dict[str, Any] = {
             "site": {
                 "name": self.name,
                 "longitude_deg": self.longitude_deg,
@@ -60,6 +62,8 @@ class SiteConfig:
             },
             "devices": {k: dict(v) for k, v in self.devices.items()},
         }
+        if self.references:
+            document["references"] = dict(self.references)
         return yaml.safe_dump(document, sort_keys=False)
 
 
@@ -77,6 +81,13 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     if not isinstance(devices, dict):
         problems.append("'devices' must be a mapping")
         devices = {}
+    references = document.get("references") or {}
+    if not isinstance(references, dict) or not all(
+        isinstance(v, str) for v in references.values()
+    ):
+        problems.append("'references' must map names to file paths")
+        references = {}
+    problems += [f"unknown key 'references.{k}'" for k in references if k != "test_load"]
     for key in site:
         if key not in ("name", "longitude_deg", "latitude_deg"):
             problems.append(f"unknown key 'site.{key}'")
@@ -103,6 +114,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         longitude_deg=longitude,
         latitude_deg=latitude,
         devices={k: dict(v) for k, v in devices.items()},
+        references=dict(references),
         source=source,
     )
 

@@ -139,13 +139,25 @@ int main(int argc, char** argv) {
 
   reach::host::HostHal hal(/*real_time=*/true);
   hal.set_uart_fd(uart1);
-  hal.host_sink = [master](const char* data, size_t n) { write_drop(master, data, n); };
+  // A reply leaves only after the pin changes it caused have been reported on stdout, so
+  // whoever has read the reply can trust the simulator's view of the switches.
+  uint64_t pins_reported = 0;
+  reach::Firmware* reporting = nullptr;
+  hal.host_sink = [&](const char* data, size_t n) {
+    if (reporting != nullptr && hal.write_count() != pins_reported) {
+      print_pins(*reporting);
+      pins_reported = hal.write_count();
+    }
+    write_drop(master, data, n);
+  };
   reach::Firmware fw(hal);
+  reporting = &fw;
   fw.begin();
   hal.watchdog_kick();
 
   printf("PTY %s\n", slave_path);
   print_pins(fw);
+  pins_reported = hal.write_count();
 
   bool hung = false;
   bool uart1_alive = uart1 >= 0;
@@ -182,9 +194,11 @@ int main(int argc, char** argv) {
       if (fds[1].revents & POLLIN) {
         ssize_t got = read(master, buf, sizeof buf);
         for (ssize_t i = 0; i < got; ++i) {
-          uint64_t writes = hal.write_count();
           fw.feed(static_cast<uint8_t>(buf[i]));
-          if (hal.write_count() != writes) print_pins(fw);
+          if (hal.write_count() != pins_reported) {
+            print_pins(fw);
+            pins_reported = hal.write_count();
+          }
         }
       } else if (fds[1].revents & (POLLHUP | POLLERR)) {
         poll(nullptr, 0, 10);  // no slave open at all: wait instead of spinning
@@ -207,6 +221,7 @@ int main(int argc, char** argv) {
       hal.watchdog_kick();
       hung = false;
       print_pins(fw);
+      pins_reported = hal.write_count();
     }
   }
   if (uart1 >= 0) close(uart1);

@@ -115,6 +115,9 @@ class ReceiverPhysics:
         self._lock = threading.Lock()
         self._pins: dict[str, str] = {}
         self._t0 = clock.now()
+        #: Called before every measurement to take in pin changes not yet reported
+        #: (the simulated Teensy's ``sync``): a measurement never sees stale switches.
+        self.sync_pins: Callable[[], None] = lambda: None
 
     # ----------------------------------------------------------------- switch state
     def update_pins(self, pins: Mapping[str, str]) -> None:
@@ -174,6 +177,7 @@ class ReceiverPhysics:
 
     def reflection_at_vna(self, freq_hz: FloatArray) -> ComplexArray:
         """What the VNA measures at its port now, before its own error model."""
+        self.sync_pins()
         return self.reflection(self.vna_target(), freq_hz)
 
     # ----------------------------------------------------------------- temperatures
@@ -245,6 +249,7 @@ class ReceiverPhysics:
         channel gets radiometer noise ``P / sqrt(B tau)``. With the LNA rail off there is
         no signal, only a floor ten orders of magnitude down.
         """
+        self.sync_pins()
         t_mid = t_start + 0.5 * duration_s
         radiometer = 1.0 / math.sqrt(self.config.channel_width_hz * duration_s)
         if self._on("6v"):

@@ -26,6 +26,8 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from reach_receiver.clock import Clock, CompressedClock
 from reach_receiver.sim.itpm import ItpmSimulator
 from reach_receiver.sim.physics import PhysicsConfig, ReceiverPhysics
@@ -34,6 +36,7 @@ from reach_receiver.sim.tec import TecSimulator
 from reach_receiver.sim.teensy_firmware import FirmwareTeensy
 from reach_receiver.sim.vna import VnaSimulator
 from reach_receiver.site import SiteConfig
+from reach_receiver.store.touchstone import write_touchstone
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +121,7 @@ class SimulatedReceiver:
         )
         self.teensy: FirmwareTeensy | None = None
         self.tc08: Tc08StandIn | None = None
+        self.test_load_reference = self.workdir / "test_load_reference.s1p"
         self._started = False
 
     def start(self) -> SiteConfig:
@@ -126,6 +130,7 @@ class SimulatedReceiver:
         self.teensy = FirmwareTeensy(uart1=tec_port)
         self.teensy.start()
         self.teensy.on_change(self.physics.update_pins)
+        self.physics.sync_pins = self.teensy.sync
         self.physics.update_pins(self.teensy.state)
         for address, celsius in self.physics.mcp9808_c().items():
             self.teensy.set_sensor(address, celsius)
@@ -133,9 +138,24 @@ class SimulatedReceiver:
         self.itpm.start()
         self.tc08 = Tc08StandIn(self.workdir / "tc08", self.physics.thermocouples_c, self.clock)
         self.tc08.start()
+        self.test_load_reference = self._write_test_load_reference()
         self._started = True
         log.info("simulated receiver started: %s", self.site().devices)
         return self.site()
+
+    def _write_test_load_reference(self) -> Path:
+        """The lab (PNA-X) measurement of the MS2-6 test load, as a Touchstone file.
+
+        The simulated lab instrument is ten times quieter than the field VNA at REACH's
+        settings: the true reflection plus 2e-5 of complex noise, 40-180 MHz at 0.5 MHz.
+        """
+        freq = np.arange(40e6, 180e6 + 1.0, 0.5e6)
+        rng = np.random.default_rng(self.settings.seed + 7)
+        noise = 2e-5 * (rng.standard_normal(freq.size) + 1j * rng.standard_normal(freq.size))
+        path = self.workdir / "test_load_reference.s1p"
+        s11 = self.physics.reflection("test_load", freq) + noise / np.sqrt(2)
+        write_touchstone(path, freq, s11, comment="simulated PNA-X measurement of MS2-6")
+        return path
 
     def site(self) -> SiteConfig:
         """The site configuration of the running simulators."""
@@ -151,8 +171,13 @@ class SimulatedReceiver:
                 "tec": {"via": "teensy"},
                 "vna": {"resource": self.vna.address},
                 "tc08": {"library": str(self.tc08.library)},
-                "spectrometer": {"host": host, "port": port},
+                "spectrometer": {
+                    "host": host,
+                    "port": port,
+                    "period_s": self.settings.spectrum_period_s,
+                },
             },
+            references={"test_load": str(self.test_load_reference)},
             source="reach-sim",
         )
 
@@ -171,6 +196,7 @@ class SimulatedReceiver:
                 stop()
             except Exception:  # a stop that fails must not keep the others running
                 log.exception("stopping a simulator failed")
+        self.physics.sync_pins = lambda: None
         self.teensy = None
         self.tc08 = None
         if self._tmp is not None:

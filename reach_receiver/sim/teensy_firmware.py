@@ -26,6 +26,8 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import logging
+import os
+import select
 import subprocess
 import threading
 from collections.abc import Callable
@@ -147,7 +149,10 @@ class FirmwareTeensy:
         self.start_timeout_s = start_timeout_s
         self.firmware_dir = firmware_dir
         self.build = build
-        self._proc: subprocess.Popen[str] | None = None
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._read_lock = threading.Lock()
+        self._pending = b""
+        self._eof = False
         self._reader: threading.Thread | None = None
         self._port: str | None = None
         self._started = threading.Event()
@@ -172,6 +177,7 @@ class FirmwareTeensy:
             return
         with self._changed:
             self._state = {}
+        self._pending, self._eof = b"", False
         binary = (
             ensure_built(self.firmware_dir) if self.build else simulator_binary(self.firmware_dir)
         )
@@ -184,8 +190,7 @@ class FirmwareTeensy:
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
-                text=True,
-                bufsize=1,
+                bufsize=0,
             )
         except OSError as err:
             raise ReceiverError(f"{DEVICE}: cannot start {binary}: {err}") from err
@@ -302,25 +307,64 @@ class FirmwareTeensy:
             raise ReceiverError(f"{DEVICE}: not started")
         with self._stdin_lock:
             try:
-                proc.stdin.write(line + "\n")
+                proc.stdin.write((line + "\n").encode())
                 proc.stdin.flush()
             except (OSError, ValueError) as err:
                 raise ConnectionLost(DEVICE, f"simulator input closed: {err}", line) from err
+
+    def sync(self) -> None:
+        """Take in every line the program has written so far, before returning.
+
+        The program reports pin changes before it sends the reply that caused them, so
+        after a driver has read a reply, ``sync()`` makes :attr:`state` include its
+        effect. The simulated instruments call it before they measure, which removes the
+        race between the reader thread and a measurement right after a switch.
+        """
+        proc = self._proc
+        if proc is not None:
+            self._drain(proc)
 
     def _read_output(self) -> None:
         proc = self._proc
         if proc is None or proc.stdout is None:
             return
-        for raw in proc.stdout:
-            line = raw.rstrip("\n")
-            if line.startswith("PTY "):
-                self._port = line[4:].strip()
-            elif line.startswith("PINS "):
-                self._publish(parse_pins(line[5:]))
-                self._started.set()  # started: terminal open and first state known
-            else:
-                logger.info("%s: %s", DEVICE, line)
+        fd = proc.stdout.fileno()
+        os.set_blocking(fd, False)
+        while not self._eof:
+            try:
+                select.select([fd], [], [], 0.05)
+            except (OSError, ValueError):
+                break
+            self._drain(proc)
         self._started.set()  # wake start() if the program died before its PTY line
+
+    def _drain(self, proc: subprocess.Popen[bytes]) -> None:
+        if proc.stdout is None:
+            return
+        with self._read_lock:
+            while not self._eof:
+                try:
+                    chunk = os.read(proc.stdout.fileno(), 65536)
+                except BlockingIOError:
+                    break
+                except (OSError, ValueError):
+                    chunk = b""
+                if not chunk:
+                    self._eof = True
+                    break
+                self._pending += chunk
+            *lines, self._pending = self._pending.split(b"\n")
+            for raw in lines:
+                self._line(raw.decode("ascii", errors="replace"))
+
+    def _line(self, line: str) -> None:
+        if line.startswith("PTY "):
+            self._port = line[4:].strip()
+        elif line.startswith("PINS "):
+            self._publish(parse_pins(line[5:]))
+            self._started.set()  # started: terminal open and first state known
+        elif line:
+            logger.info("%s: %s", DEVICE, line)
 
     def _publish(self, state: dict[str, str]) -> None:
         with self._changed:
