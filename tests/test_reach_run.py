@@ -1,0 +1,112 @@
+"""``reach-run`` end to end against the simulated receiver: the main job, bad input, faults."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from reach_receiver.cli import run_main
+from reach_receiver.clock import ManualClock
+from reach_receiver.sim.physics import ReceiverPhysics
+from reach_receiver.store import merge_run, read_run_file
+
+SCHEDULES = Path(__file__).resolve().parents[1] / "schedules"
+
+
+def only_run(out: Path) -> Path:
+    (directory,) = [p for p in out.iterdir() if p.is_dir()]
+    return directory
+
+
+def test_every_shipped_schedule_validates(capsys):
+    for path in sorted(SCHEDULES.glob("*.yaml")):
+        if path.name == "common.yaml":
+            continue
+        assert run_main([str(path), "--sim", "--validate"]) == 0, path
+        assert "estimated duration" in capsys.readouterr().out
+
+
+def test_dry_run_prints_the_timeline(capsys):
+    assert run_main([str(SCHEDULES / "calibrate.yaml"), "--sim", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "Dicke cycles of cold" in out
+    assert "calibrate.yaml:" in out
+
+
+def test_main_job_recovers_the_simulators_noise_waves(tmp_path, capsys):
+    started = time.monotonic()
+    assert run_main([str(SCHEDULES / "calibrate.yaml"), "--sim", "--out", str(tmp_path), "-q"]) == 0
+    wall = time.monotonic() - started
+    out = capsys.readouterr().out
+    assert "check test load: PASS" in out
+    assert "actual calibration error against the simulator's truth" in out
+    run_file = only_run(tmp_path) / "run.h5"
+    contents = read_run_file(run_file)
+    data, others = contents.calibration_data()
+    assert len(data.sources) == 12
+    assert "ant" in others
+    solution = contents.solution()
+    truth = ReceiverPhysics(ManualClock()).effective_theta(data.freq_hz)
+    z = (solution.evaluate(data.freq_hz) - truth) / solution.parameter_std(data.freq_hz)
+    assert np.all(np.sqrt(np.mean(z**2, axis=1)) < 4.0)
+    assert wall < 120  # the README promises <= 60 s; tests run on loaded machines
+
+
+def test_malformed_schedule_fails_before_anything_moves(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(
+        "schedule: bad\n"
+        "steps:\n"
+        "  - initialise: {}\n"
+        "  - dicke: {sources: [hot, sky], seconds: -5}\n"
+        "  - power: {5v: off}\n"
+        "  - s11: {targts: [hot]}\n"
+    )
+    out = tmp_path / "runs"
+    assert run_main([str(bad), "--sim", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}:4" in err  # the unknown source and the negative duration
+    assert "sky" in err
+    assert "seconds" in err
+    assert f"{bad}:5" in err
+    assert "5v" in err
+    assert f"{bad}:6" in err
+    assert "targts" in err
+    assert not out.exists()  # no run started, no device contacted
+
+
+def test_sigkill_mid_integration_leaves_every_completed_measurement(tmp_path):
+    out = tmp_path / "runs"
+    entry = "from reach_receiver.cli import run_main; raise SystemExit(run_main())"
+    options = ["--sim", "--out", str(out), "-q", "--compression", "600"]
+    process = subprocess.Popen(
+        [sys.executable, "-c", entry, str(SCHEDULES / "quick.yaml"), *options],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        parts: list[Path] = []
+        while time.monotonic() < deadline:
+            parts = sorted(out.glob("*/parts/*.h5")) if out.exists() else []
+            dicke = [p for p in parts if "dicke" in p.name]
+            if dicke:
+                break
+            time.sleep(0.02)
+        assert parts, "the run never stored a measurement"
+        os.kill(process.pid, signal.SIGKILL)
+        process.wait(timeout=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    directory = only_run(out)
+    completed = {p.name for p in parts}
+    run_file = merge_run(directory)
+    contents = read_run_file(run_file)
+    kinds = [m.kind for m in contents.measurements]
+    assert "dicke" in kinds
+    assert len(contents.measurements) >= len([n for n in completed if "-run-" not in n]) - 1
