@@ -17,7 +17,7 @@ import logging
 import math
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -141,6 +141,7 @@ class DickeCycle:
     spectra: Mapping[str, AccumulatedSpectrum]
     integration_s: Mapping[str, float]
     temperatures: Mapping[str, tuple[Tc08Reading, ...]]
+    switch_states: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
 
     def temperature_k(self, port: int, position: str = "source") -> float:
         """Mean of the port's good readings during one position's integration, kelvin."""
@@ -164,8 +165,9 @@ def take_dicke_cycle(
     spectra: dict[str, AccumulatedSpectrum] = {}
     seconds: dict[str, float] = {}
     readings: dict[str, tuple[Tc08Reading, ...]] = {}
+    states: dict[str, Mapping[str, str]] = {}
     for position in DICKE_POSITIONS:
-        frontend.connect(connects[position], "lna")
+        states[position] = frontend.connect(connects[position], "lna").as_pins()
         accumulated = spectrometer.integrate(n_spectra, discard=discard)
         spectra[position] = accumulated
         seconds[position] = integration_seconds(accumulated, spectrometer.period)
@@ -173,7 +175,7 @@ def take_dicke_cycle(
         if temperatures is not None:
             readings[position] = temperatures.readings(accumulated.start_time, end)
         log.info("%s: %s position, %d spectra", source, position, accumulated.n_spectra)
-    return DickeCycle(source, spectra, seconds, readings)
+    return DickeCycle(source, spectra, seconds, readings, states)
 
 
 def integration_seconds(accumulated: AccumulatedSpectrum, period_s: float | None) -> float:

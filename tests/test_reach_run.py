@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from reach_receiver.cli import run_main
 from reach_receiver.clock import ManualClock
@@ -110,3 +111,45 @@ def test_sigkill_mid_integration_leaves_every_completed_measurement(tmp_path):
     kinds = [m.kind for m in contents.measurements]
     assert "dicke" in kinds
     assert len(contents.measurements) >= len([n for n in completed if "-run-" not in n]) - 1
+
+
+@pytest.mark.parametrize("name", ["reach_operations.yaml", "vna_cal.yaml"])
+def test_shipped_schedules_run_against_the_simulator(name, tmp_path, capsys):
+    assert run_main([str(SCHEDULES / name), "--sim", "--out", str(tmp_path), "-q"]) == 0
+    contents = read_run_file(only_run(tmp_path) / "run.h5")
+    assert contents.status == "completed"
+    kinds = [m.kind for m in contents.measurements]
+    if name == "reach_operations.yaml":
+        assert kinds.count("spectrum") == 1 + 20 * 3
+        assert ("s11", "ns") in [(m.kind, m.name) for m in contents.measurements]
+    else:
+        assert "check test load: PASS" in capsys.readouterr().out
+
+
+def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, capsys):
+    schedule = tmp_path / "night.yaml"
+    schedule.write_text(
+        "schedule: night\n"
+        "vars: {cal: [cold, hot, c10open, c10short, r25, r100]}\n"
+        "steps:\n"
+        "  - initialise\n"
+        "  - temperatures: {period_s: 30}\n"
+        "  - dicke: {sources: '${cal}', seconds: 600}\n"
+        "  - vna_calibrate\n"
+        "  - test_load_check\n"
+        "  - s11: {targets: '${cal}'}\n"
+        "  - s11: {targets: [ant, lna]}\n"
+        "  - calibrate\n"
+        "  - observe: {cycles: 3, seconds: 300, test_load_every: 2}\n"
+        "  - safe\n"
+    )
+    assert run_main([str(schedule), "--sim", "--out", str(tmp_path / "runs"), "-q"]) == 0
+    contents = read_run_file(only_run(tmp_path / "runs") / "run.h5")
+    calibrated = contents.of_kind("calibrated")
+    assert [m.name for m in calibrated] == ["ant_0000", "ant_0001", "ant_0002"]
+    checks = [m for m in contents.of_kind("check") if m.name == "test_load"]
+    assert len(checks) == 2  # the initial one and the one before cycle 2
+    arrays = contents.read(calibrated[0])
+    sky = 2000.0 * (arrays["frequencies"] / 75e6) ** -2.5
+    z = (arrays["mean"] - sky) / arrays["std"]
+    assert 0.55 < np.mean(np.abs(z) < 1) < 0.8

@@ -258,7 +258,10 @@ class Actions:
             integration_s=dict(cycle.integration_s),
             n_spectra={k: v.n_spectra for k, v in cycle.spectra.items()},
             temperature_k=temperature,
-            switch_states={k: {"connected": connects[k]} for k in cycle.spectra},
+            switch_states={
+                k: {"connected": connects[k], **cycle.switch_states.get(k, {})}
+                for k in cycle.spectra
+            },
             counters={
                 k: {"packets_lost": v.packets_lost, "heaps_dropped": v.heaps_dropped}
                 for k, v in cycle.spectra.items()

@@ -13,8 +13,10 @@ their verdicts.
   polynomial coefficients depend on the basis and order, so the comparison is made on
   the parameters themselves, band-averaged: ``|<T_new> - <T_ref>| / |<T_ref>|`` for each
   of T_unc, T_cos, T_sin, T_NS, T_L.
-* **RFI**: a channel is flagged when its residual from a running median over
-  ``window`` channels exceeds ``threshold`` times the robust scatter (1.4826 x MAD).
+* **RFI**: a smooth spectrum (a degree-7 polynomial, refitted without the outliers) is
+  removed first, then what is left of broad structure by a running median over
+  ``window`` channels; a channel is flagged when its residual exceeds ``threshold``
+  times the robust scatter (1.4826 x MAD).
 """
 
 from __future__ import annotations
@@ -91,8 +93,14 @@ def compare_with_benchmark(
 def rfi_flags(spectrum: FloatArray, threshold: float = 5.0, window: int = 65) -> NDArray[np.bool_]:
     """Channels whose excess over a running median exceeds ``threshold`` robust sigmas."""
     values = np.asarray(spectrum, dtype=float)
-    smooth = median_filter(values, size=window, mode="nearest")
-    residual = values - smooth
+    x = np.linspace(-1.0, 1.0, values.size)
+    keep = np.ones(values.size, dtype=bool)
+    for _ in range(3):  # refit without the outliers of the previous fit
+        fit = np.polynomial.legendre.Legendre.fit(x[keep], values[keep], 7)
+        detrended = values - fit(x)
+        spread = 1.4826 * np.median(np.abs(detrended[keep] - np.median(detrended[keep])))
+        keep = np.abs(detrended) <= threshold * spread if spread > 0 else keep
+    residual = detrended - median_filter(detrended, size=window, mode="reflect")
     scatter = 1.4826 * np.median(np.abs(residual - np.median(residual)))
     if not scatter > 0:
         return np.zeros(values.shape, dtype=bool)
