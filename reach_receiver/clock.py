@@ -52,14 +52,29 @@ class CompressedClock:
         Simulated seconds per real second (1 is real time).
     start
         Simulated epoch of the moment the clock is made; the wall clock's by default.
+    monotonic_origin
+        The ``time.monotonic()`` reading at which simulated time was ``start``; now by
+        default. The monotonic clock is system-wide on Linux, so another process given
+        the same ``(factor, start, monotonic_origin)`` keeps exactly the same simulated
+        time: that is how ``reach-run`` follows a ``reach-sim`` running in its own process.
     """
 
-    def __init__(self, factor: float = 1.0, start: float | None = None) -> None:
+    def __init__(
+        self,
+        factor: float = 1.0,
+        start: float | None = None,
+        monotonic_origin: float | None = None,
+    ) -> None:
         if not factor > 0:
             raise ValueError(f"time compression factor must be positive, got {factor}")
         self.factor = float(factor)
         self._t0 = time.time() if start is None else float(start)
-        self._m0 = time.monotonic()
+        self._m0 = time.monotonic() if monotonic_origin is None else float(monotonic_origin)
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """What another process needs to share this clock (see ``monotonic_origin``)."""
+        return {"compression": self.factor, "start": self._t0, "monotonic_origin": self._m0}
 
     def now(self) -> float:
         """Simulated seconds since the Unix epoch."""

@@ -24,7 +24,7 @@ from datetime import datetime, timezone
 from importlib import metadata
 from types import FrameType
 
-from reach_receiver.clock import Clock, SystemClock
+from reach_receiver.clock import Clock, CompressedClock, SystemClock
 from reach_receiver.errors import ReceiverError
 from reach_receiver.instruments import Instruments
 from reach_receiver.schedule import steps as st
@@ -116,6 +116,12 @@ def run_command(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         sim: SimulatedReceiver | None = None
         clock: Clock = SystemClock()
+        if site.simulation:  # a reach-sim in another process: share its simulated time
+            clock = CompressedClock(
+                site.simulation["compression"],
+                site.simulation["start"],
+                site.simulation["monotonic_origin"],
+            )
         if args.sim:
             settings = SimulationSettings(compression=args.compression, seed=args.seed)
             sim = stack.enter_context(SimulatedReceiver(settings))
@@ -143,7 +149,7 @@ def _execute(
         schedule_files=schedule.files,
         site_yaml=site.to_yaml(),
         metadata={
-            "simulated": sim is not None,
+            "simulated": sim is not None or bool(site.simulation),
             "compression": args.compression if sim is not None else 1.0,
             "reach_receiver": metadata.version("reach-receiver"),
             "started_utc": stamp,

@@ -11,7 +11,8 @@ A YAML mapping, safe-loaded, unknown keys rejected with the file and key named::
       spectrometer: {host: 0.0.0.0, port: 4660}
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
 
-``reach-sim`` prints one of these with the simulated instruments' addresses.
+``reach-sim`` prints one of these with the simulated instruments' addresses and a
+``simulation`` section (its compressed clock), which ``reach-run`` then shares.
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ import yaml
 
 from reach_receiver.errors import ConfigError
 
-_SECTIONS = {"site", "devices", "references"}
+_SECTIONS = {"site", "devices", "references", "simulation"}
+_SIMULATION_KEYS = {"compression", "start", "monotonic_origin"}
 _DEVICE_KEYS: Mapping[str, set[str]] = {
     "teensy": {"port", "timeout_s"},
     "vna": {"resource", "timeout_s"},
@@ -44,6 +46,7 @@ class SiteConfig:
     latitude_deg: float = 0.0
     devices: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     references: Mapping[str, str] = field(default_factory=dict)
+    simulation: Mapping[str, float] = field(default_factory=dict)
     source: str = "<memory>"
 
     def device(self, name: str) -> Mapping[str, Any]:
@@ -64,6 +67,8 @@ class SiteConfig:
         }
         if self.references:
             document["references"] = dict(self.references)
+        if self.simulation:
+            document["simulation"] = dict(self.simulation)
         return yaml.safe_dump(document, sort_keys=False)
 
 
@@ -88,6 +93,10 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         problems.append("'references' must map names to file paths")
         references = {}
     problems += [f"unknown key 'references.{k}'" for k in references if k != "test_load"]
+    simulation = document.get("simulation") or {}
+    if not isinstance(simulation, dict) or set(simulation) - _SIMULATION_KEYS:
+        problems.append(f"'simulation' takes only {sorted(_SIMULATION_KEYS)}")
+        simulation = {}
     for key in site:
         if key not in ("name", "longitude_deg", "latitude_deg"):
             problems.append(f"unknown key 'site.{key}'")
@@ -115,6 +124,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         latitude_deg=latitude,
         devices={k: dict(v) for k, v in devices.items()},
         references=dict(references),
+        simulation={k: float(v) for k, v in simulation.items()},
         source=source,
     )
 

@@ -4,9 +4,11 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
+from reach_receiver.cli import run_main
 from reach_receiver.clock import SystemClock
 from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.tc08 import Tc08
@@ -53,5 +55,18 @@ def test_reach_sim_serves_its_site_file_and_stops_cleanly(reach_sim):
         assert spectrum.data.shape == (2, 16384)
     with Tc08(load_libusbtc08(site.device("tc08")["library"]), clock) as tc08:
         assert 20.0 < tc08.read().temperatures_c[1] < 30.0
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=20) == 0
+
+
+def test_reach_run_follows_a_reach_sim_in_another_process(reach_sim, tmp_path, capsys):
+    """The site file carries the simulator's compressed clock, which reach-run shares."""
+    process, site_file = reach_sim
+    schedule = Path(__file__).resolve().parents[1] / "schedules" / "quick.yaml"
+    out = tmp_path / "runs"
+    assert run_main(["--site", str(site_file), str(schedule), "--out", str(out), "-q"]) == 0
+    printed = capsys.readouterr().out
+    assert "check test load: PASS" in printed
+    assert "distance to floor" in printed
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=20) == 0

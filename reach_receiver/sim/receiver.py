@@ -178,6 +178,9 @@ class SimulatedReceiver:
                 },
             },
             references={"test_load": str(self.test_load_reference)},
+            simulation=(
+                self.clock.parameters if isinstance(self.clock, CompressedClock) else {}
+            ),
             source="reach-sim",
         )
 
