@@ -150,7 +150,7 @@ class FrontEnd:
 
     def safe(self) -> FrontEndState:
         """Put the front-end in its safe state."""
-        log.warning("front-end: going to the safe state")
+        log.info("front-end: going to the safe state")
         return self.matrix.safe()
 
     @staticmethod
