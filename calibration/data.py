@@ -76,6 +76,10 @@ class SourceData:
     q_variance_override
         Variance of Q per channel when it is known better than from the radiometer
         equation (e.g. measured scatter of real averaged spectra).
+    temperature_std_k
+        Standard uncertainty of the temperature, common to all channels (K): a
+        thermometer's error is one offset for the whole spectrum. The radiometric solver
+        marginalises it (:func:`calibration.normal_equations.build_normal_equations`).
     """
 
     name: str
@@ -86,6 +90,7 @@ class SourceData:
     integration: Integration
     temperature_k: FloatArray | None = None
     q_variance_override: FloatArray | None = None
+    temperature_std_k: float = 0.0
 
     def checked(self, n_channels: int) -> SourceData:
         """Return a copy with arrays coerced to ``n_channels`` and every value checked."""
@@ -118,6 +123,10 @@ class SourceData:
             temp = _channel_array(self.temperature_k, n_channels, "temperature", name)
             if np.any(temp <= 0):
                 raise InvalidDataError("temperature must be > 0 K", name)
+        if not (np.isfinite(self.temperature_std_k) and self.temperature_std_k >= 0):
+            raise InvalidDataError(
+                f"temperature uncertainty must be >= 0 K, got {self.temperature_std_k}", name
+            )
         override = None
         if self.q_variance_override is not None:
             override = _channel_array(self.q_variance_override, n_channels, "Q variance", name)
@@ -229,6 +238,10 @@ class CalibrationData:
         q = np.stack([s.q for s in self.sources.values()])
         var = np.stack([s.q_variance(self.channel_width_hz) for s in self.sources.values()])
         return temps, q, var
+
+    def temperature_variances(self) -> FloatArray:
+        """Variance of each calibrator's temperature offset (K^2), in source order."""
+        return np.array([s.temperature_std_k**2 for s in self.sources.values()], dtype=float)
 
     def subset(self, names: Iterable[str]) -> CalibrationData:
         """The same run with only the named calibrators (in the given order)."""

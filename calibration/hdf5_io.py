@@ -17,7 +17,8 @@ layout of REACH's own tools::
     /observation_data/{src}_ns_spectra         P_NS,     (n,) or (n_spectra, n)
     /observation_data/{src}_s11                (n,) complex: source reflection
     /observation_data/{src}_q_variance         (n,) optional override of var(Q)
-    /observation_metadata/temperatures/{src}   (n,) or scalar, K: calibrators only
+    /observation_metadata/temperatures/{src}   (n,) or scalar, K: calibrators only;
+                                               attribute std_k: its uncertainty (K)
     /simulation_truth/{orders, coefficients, gain_coefficients, offset_coefficients_k}
 
 ``{src}_timestamps`` are allowed and ignored. Attributes: ``units`` on every dataset; on
@@ -242,7 +243,8 @@ def write_run(
             if src.q_variance_override is not None:
                 _dataset(obs, f"{name}_q_variance", src.q_variance_override, "1")
             if src.temperature_k is not None:
-                _dataset(temps, name, src.temperature_k, "K")
+                t = _dataset(temps, name, src.temperature_k, "K")
+                t.attrs["std_k"] = float(src.temperature_std_k)
         if truth is not None:
             g = f.create_group("simulation_truth")
             params = truth.parameters
@@ -273,6 +275,7 @@ def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> 
         seconds.append(per_row * (arr.shape[0] if arr.ndim == 2 else 1))
     gamma = _array(obs, f"{name}_s11", path, "iufc").astype(complex)
     temperature = _array(temps, name, path).astype(float) if name in temps else None
+    std_k = float(temps[name].attrs.get("std_k", 0.0)) if name in temps else 0.0
     q_var = f"{name}_q_variance"
     override = _array(obs, q_var, path).astype(float) if q_var in obs else None
     try:
@@ -280,7 +283,9 @@ def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> 
     except InvalidDataError as err:
         raise InvalidDataError(str(err), name) from err
     p_src, p_load, p_ns = powers
-    return SourceData(name, gamma, p_src, p_load, p_ns, integration, temperature, override)
+    return SourceData(
+        name, gamma, p_src, p_load, p_ns, integration, temperature, override, std_k
+    )
 
 
 def read_run(path: PathLike) -> tuple[CalibrationData, dict[str, SourceData]]:

@@ -11,7 +11,23 @@ moments over the largest model (``max_orders``)::
 
 with ``x_if`` the design row (features times basis functions). They cost
 ``O(n_sources n_channels n_max^2)`` to build and nothing thereafter: any sub-model is a
-sub-block of ``G``. Expressing the fit relative to ``c_ref`` keeps every quadratic form at
+sub-block of ``G``.
+
+**Uncertain calibrator temperatures.** A thermometer's error is one offset ``d_i`` for all
+channels of source ``i``. With ``d_i ~ N(0, sigma_i^2)`` marginalised, the rows of source
+``i`` have covariance ``D_i + sigma_i^2 1 1^T`` instead of ``D_i = diag(1/w_i)``, and by
+the Woodbury identity every moment takes a rank-one correction per source::
+
+    k_i = sigma_i^2 / (1 + sigma_i^2 a_i),   a_i = sum_f w_if
+    u_i = sum_f w_if x_if,                   v_i = sum_f w_if r_if
+    G -= k_i u_i u_i^T,   g -= k_i u_i v_i,   chi -= k_i v_i^2,
+    sum log w -= log(1 + sigma_i^2 a_i)      (the log-determinant)
+
+so the moment form, and everything built on it, carries over exactly. (The evidence's
+noise scale ``s^2`` then scales the offsets' variance too; with ``s^2`` near 1, as the
+radiometer equation makes it, that is immaterial.)
+
+Expressing the fit relative to ``c_ref`` keeps every quadratic form at
 the size of the noise, so the evidence does not lose digits to ``y^T W y``, which is
 ``~1e10`` for kelvin-scale data with millikelvin noise (the cancellation the thesis
 warns of in its footnote to eq. 3.36). No ``n_channels x n_channels`` matrix is formed.
@@ -120,12 +136,15 @@ def build_normal_equations(
     max_orders: Sequence[int],
     reference: FloatArray | None = None,
     ridge: FloatArray | None = None,
+    offset_variance: FloatArray | None = None,
 ) -> NormalEquations:
     """Build :class:`NormalEquations` for ``features (M, N, 5)``, ``weights``/``response (M, N)``.
 
     ``basis`` is ``(N, max(max_orders))``. Without ``reference`` the reference fit is the
     largest model's weighted least squares, regularised by ``ridge`` (prior precisions,
     one per coefficient) so that it exists even when the data leave directions free.
+    ``offset_variance`` (one per source ``M``, K^2) marginalises a per-source offset of the
+    response: the calibrators' temperature uncertainty (module docstring).
     """
     max_orders = as_orders(max_orders)
     gram = _project_pairs(features, weights, basis, max_orders)
@@ -139,12 +158,27 @@ def build_normal_equations(
         "mnk,kn->mn", features, evaluate_coefficients(reference, basis, max_orders)
     )
     wr = weights * residual
+    cross = _project_vector(features, wr, basis, max_orders)
+    chi2_ref = float(np.sum(wr * residual))
+    sum_log_weights = float(np.sum(np.log(weights)))
+    if offset_variance is not None:
+        for m, var in enumerate(np.asarray(offset_variance, dtype=float)):
+            if var <= 0:
+                continue
+            a = float(np.sum(weights[m]))
+            u = _project_vector(features[m : m + 1], weights[m : m + 1], basis, max_orders)
+            v = float(np.sum(wr[m]))
+            k = var / (1.0 + var * a)
+            gram = gram - k * np.outer(u, u)
+            cross = cross - k * u * v
+            chi2_ref -= k * v * v
+            sum_log_weights -= float(np.log1p(var * a))
     return NormalEquations(
         max_orders=max_orders,
         gram=gram,
-        cross=_project_vector(features, wr, basis, max_orders),
-        chi2_ref=float(np.sum(wr * residual)),
+        cross=cross,
+        chi2_ref=chi2_ref,
         reference=np.asarray(reference, dtype=float),
         n_rows=int(weights.size),
-        sum_log_weights=float(np.sum(np.log(weights))),
+        sum_log_weights=sum_log_weights,
     )

@@ -22,6 +22,10 @@ errors-in-variables bias, and because ``w`` follows the radiometer equation, the
 is efficient: its error reaches the Cramer-Rao floor (:mod:`calibration.noise_floor`).
 ``T_NS`` is known to ~1e-5 after the first step, so two or three iterations converge.
 
+Calibrator temperatures with a stated uncertainty (``SourceData.temperature_std_k``) have
+their per-source offset marginalised in the normal equations, so the posterior, the
+evidence and the predictive include the thermometry's error.
+
 ``s^2`` either has an inverse-gamma prior with mode 1 (default: the radiometer equation
 is trusted but can be found wrong, which inflates the error bars) or is fixed at 1.
 """
@@ -87,10 +91,20 @@ def linearise(
 
 
 def _normal_equations(
-    problem: LinearisedProblem, basis: FloatArray, orders: Orders, ridge: FloatArray
+    problem: LinearisedProblem,
+    basis: FloatArray,
+    orders: Orders,
+    ridge: FloatArray,
+    offset_variance: FloatArray | None = None,
 ) -> NormalEquations:
     return build_normal_equations(
-        problem.features, problem.weights, problem.response, basis, orders, ridge=ridge
+        problem.features,
+        problem.weights,
+        problem.response,
+        basis,
+        orders,
+        ridge=ridge,
+        offset_variance=offset_variance,
     )
 
 
@@ -116,6 +130,8 @@ def solve_radiometric(
     basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
     terms = data.terms()
     temps, q, var_q = data.stacked()
+    offsets = data.temperature_variances()
+    offset_var = offsets if np.any(offsets > 0) else None
 
     def ridge(orders: Orders) -> FloatArray:
         return 1.0 / prior.coefficients.vectors(orders)[1]
@@ -128,7 +144,7 @@ def solve_radiometric(
         for _ in range(iterations):
             theta = evaluate_coefficients(normal.reference, b, largest)
             normal = _normal_equations(
-                linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest)
+                linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest), offset_var
             )
         return normal
 
@@ -141,7 +157,11 @@ def solve_radiometric(
         for _ in range(iterations):
             theta = evaluate_coefficients(mean, b_chosen, chosen)
             refined = _normal_equations(
-                linearise(terms, temps, q, var_q, theta), b_chosen, chosen, ridge(chosen)
+                linearise(terms, temps, q, var_q, theta),
+                b_chosen,
+                chosen,
+                ridge(chosen),
+                offset_var,
             )
             mean = refined.reference
         posterior, _ = fit(refined, OrderChoice.fixed(chosen), prior.coefficients, 1.0, prior.scale)

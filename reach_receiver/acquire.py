@@ -41,6 +41,9 @@ ComplexArray = NDArray[np.complex128]
 #: Dicke positions in the order they are taken, and the source each one connects.
 DICKE_POSITIONS = ("source", "load", "ns")
 
+#: Noise of one thermocouple reading when too few readings exist to measure it (K).
+THERMOCOUPLE_NOISE_K = 0.1
+
 
 class SpectraSource(Protocol):
     """What a Dicke cycle needs of the spectrometer."""
@@ -147,6 +150,20 @@ class DickeCycle:
         """Mean of the port's good readings during one position's integration, kelvin."""
         return mean_temperature_k(self.temperatures[position], port)
 
+    def temperature_std_k(self, port: int, position: str = "source") -> float:
+        """Standard error of :meth:`temperature_k`: the readings' scatter over sqrt(n).
+
+        With fewer than three readings the scatter is not estimable and a single
+        reading's noise is taken as :data:`THERMOCOUPLE_NOISE_K`. The scatter includes any
+        real change of the temperature during the integration, which errs on the safe
+        side. A thermocouple's systematic error (a calibration offset of the logger) is
+        not in it.
+        """
+        values = good_values(self.temperatures[position], port)
+        if len(values) < 3:
+            return THERMOCOUPLE_NOISE_K / np.sqrt(max(len(values), 1))
+        return float(np.std(values, ddof=1) / np.sqrt(len(values)))
+
 
 def take_dicke_cycle(
     frontend: FrontEnd,
@@ -191,10 +208,15 @@ def take_s11(frontend: FrontEnd, vna: ReflectionMeter, target: str) -> S11Measur
     return vna.measure_s11()
 
 
+def good_values(readings: Sequence[Tc08Reading], port: int) -> list[float]:
+    """A port's unflagged, finite readings (degrees C)."""
+    values = [r.temperatures_c[port] for r in readings if port in r.good()]
+    return [v for v in values if math.isfinite(v)]
+
+
 def mean_temperature_k(readings: Sequence[Tc08Reading], port: int) -> float:
     """Mean of a port's unflagged readings, kelvin; an error when none is usable."""
-    values = [r.temperatures_c[port] for r in readings if port in r.good()]
-    values = [v for v in values if math.isfinite(v)]
+    values = good_values(readings, port)
     if not values:
         raise ReceiverError(f"no usable thermocouple reading on TC-08 port {port}")
     return float(np.mean(values)) + 273.15
@@ -229,10 +251,11 @@ def source_data(
 ) -> SourceData:
     """The engine's view of one source: S11 at the channels, Dicke powers, temperature."""
     spectra = {k: v.mean[spectrometer_input, channels] for k, v in cycle.spectra.items()}
-    temperature = None
+    temperature, temperature_std = None, 0.0
     if known_temperature:
         port = SOURCE_THERMOCOUPLE[cycle.source]
         temperature = np.full(freq_hz.shape, cycle.temperature_k(port))
+        temperature_std = cycle.temperature_std_k(port)
     return SourceData(
         name=cycle.source,
         gamma=interpolate_s11(s11, freq_hz),
@@ -243,6 +266,7 @@ def source_data(
             cycle.integration_s["source"], cycle.integration_s["load"], cycle.integration_s["ns"]
         ),
         temperature_k=temperature,
+        temperature_std_k=temperature_std,
     )
 
 

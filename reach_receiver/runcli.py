@@ -141,8 +141,12 @@ def _execute(
     sim: SimulatedReceiver | None,
     remaining: object,
 ) -> RunSummary | None:
-    stamp = datetime.fromtimestamp(clock.now(), tz=timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    stamp = datetime.now(tz=timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     directory = args.out / f"{stamp}-{schedule.name}"
+    suffix = 1
+    while directory.exists():  # two runs started within one second
+        suffix += 1
+        directory = args.out / f"{stamp}-{schedule.name}-{suffix}"
     store = RunStore(
         directory,
         name=schedule.name,

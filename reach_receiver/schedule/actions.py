@@ -249,7 +249,7 @@ class Actions:
             self.temperatures,
         )
         self.cycles.setdefault(source, []).append(cycle)
-        temperature = _source_temperature(cycle)
+        temperature, temperature_std = _source_temperature(cycle)
         connects = {"source": source, "load": REFERENCE_LOAD, "ns": NOISE_SOURCE}
         self.store.add_dicke(
             source,
@@ -258,6 +258,7 @@ class Actions:
             integration_s=dict(cycle.integration_s),
             n_spectra={k: v.n_spectra for k, v in cycle.spectra.items()},
             temperature_k=temperature,
+            temperature_std_k=temperature_std,
             switch_states={
                 k: {"connected": connects[k], **cycle.switch_states.get(k, {})}
                 for k in cycle.spectra
@@ -272,15 +273,15 @@ class Actions:
         return cycle
 
 
-def _source_temperature(cycle: DickeCycle) -> float | None:
-    """The source's mean thermocouple temperature during its own integration (K), if logged."""
+def _source_temperature(cycle: DickeCycle) -> tuple[float | None, float]:
+    """The source's mean thermocouple temperature during its integration and its error (K)."""
     port = SOURCE_THERMOCOUPLE.get(cycle.source)
     if port is None or not cycle.temperatures.get("source"):
-        return None
+        return None, 0.0
     try:
-        return cycle.temperature_k(port)
+        return cycle.temperature_k(port), cycle.temperature_std_k(port)
     except ReceiverError:
-        return None
+        return None, 0.0
 
 
 def _power_order(rails: tuple[str, ...]) -> list[str]:

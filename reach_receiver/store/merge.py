@@ -340,6 +340,8 @@ def _engine_layout(f: Any, by_kind: dict[str, list[Any]]) -> None:
         known = [g for g in rows if "temperature" in g]
         if known:
             per_cycle = [float(g["temperature"][()]) for g in known]
+            # Each cycle's error is its own; the mean's is the root-sum-square over n.
+            stds = [float(g["temperature"].attrs.get("std_k", 0.0)) for g in known]
             dataset(
                 temps,
                 src,
@@ -347,6 +349,7 @@ def _engine_layout(f: Any, by_kind: dict[str, list[Any]]) -> None:
                 UNITS_K,
                 per_cycle_k=per_cycle,
                 timestamps=[float(g.attrs["timestamp"]) for g in known],
+                std_k=float(np.sqrt(np.sum(np.square(stds))) / len(stds)),
             )
             if src != ANTENNA:
                 calibrators.append(src)

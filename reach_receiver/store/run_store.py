@@ -241,8 +241,12 @@ class RunStore:
         switch_states: Mapping[str, Mapping[str, str]],
         counters: Mapping[str, Mapping[str, int]],
         timestamp: float,
+        temperature_std_k: float = 0.0,
     ) -> None:
-        """Store one Dicke cycle: per position the mean spectrum (n_inputs, n_channels)."""
+        """Store one Dicke cycle: per position the mean spectrum (n_inputs, n_channels).
+
+        ``temperature_std_k`` is the uncertainty of ``temperature_k`` (K).
+        """
         for what, value in (("spectra", spectra), ("timestamps", timestamps)):
             _per_position(what, value)
         _per_position("integration_s", integration_s)
@@ -257,7 +261,8 @@ class RunStore:
         def fill(f: Any) -> None:
             f.attrs["source"] = source
             if temperature_k is not None:
-                dataset(f, "temperature", float(temperature_k), UNITS_K)
+                t = dataset(f, "temperature", float(temperature_k), UNITS_K)
+                t.attrs["std_k"] = float(temperature_std_k)
             for p in DICKE_POSITIONS:
                 g = f.create_group(p)
                 dataset(g, "spectrum", arrays[p], UNITS_POWER)
