@@ -153,3 +153,18 @@ def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, ca
     sky = 2000.0 * (arrays["frequencies"] / 75e6) ** -2.5
     z = (arrays["mean"] - sky) / arrays["std"]
     assert 0.55 < np.mean(np.abs(z) < 1) < 0.8
+
+
+def test_a_second_calibration_is_verified_against_the_first(tmp_path, capsys):
+    first = tmp_path / "first"
+    assert run_main([str(SCHEDULES / "quick.yaml"), "--sim", "--out", str(first), "-q"]) == 0
+    benchmark = only_run(first) / "run.h5"
+    text = (SCHEDULES / "quick.yaml").read_text()
+    again = tmp_path / "again.yaml"
+    again.write_text(
+        text.replace("include: [common.yaml]", f"include: [{SCHEDULES / 'common.yaml'}]")
+        .replace("  - calibrate: {}", f"  - calibrate: {{benchmark: {benchmark}}}")
+    )
+    capsys.readouterr()
+    assert run_main([str(again), "--sim", "--seed", "5", "--out", str(tmp_path / "b"), "-q"]) == 0
+    assert "check benchmark solution: PASS" in capsys.readouterr().out

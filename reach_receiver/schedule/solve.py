@@ -17,11 +17,13 @@ RFI channels.
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import numpy as np
 
 from calibration import CalibrationData, solve_radiometric
 from calibration.data import SourceData
+from calibration.errors import FileFormatError
 from calibration.hdf5_io import read_solution
 from calibration.noise_floor import noise_floor
 from calibration.noise_waves import design_terms, source_temperature
@@ -31,6 +33,7 @@ from reach_receiver.acquire import band_channels, interpolate_s11, source_data
 from reach_receiver.schedule import steps as st
 from reach_receiver.schedule.actions import VALIDATION_SOURCE, Actions, CheckFailed, CheckRecord
 from reach_receiver.schedule.checks import compare_with_benchmark, rfi_flags
+from reach_receiver.store import read_run_file
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +76,7 @@ def calibrate(actions: Actions, step: st.Calibrate) -> None:
     verification: dict[str, object] = {}
     if step.benchmark is not None:
         verdict = compare_with_benchmark(
-            solution, read_solution(step.benchmark), data.freq_hz, step.tolerance
+            solution, benchmark_solution(step.benchmark), data.freq_hz, step.tolerance
         )
         verification = {"passed": verdict.passed, **verdict.differences}
         worst = max(verdict.differences, key=verdict.differences.__getitem__)
@@ -89,6 +92,17 @@ def calibrate(actions: Actions, step: st.Calibrate) -> None:
     actions.store.add_solution(solution, timestamp=actions.clock.now(), verification=verification)
     actions.solution = solution
     actions.results["solution"] = _summary(actions, solution, data, others)
+
+
+def benchmark_solution(path: Path) -> Solution:
+    """A benchmark solution: a solution file (``reach-cal solve``) or an earlier run file."""
+    try:
+        return read_solution(path)
+    except FileFormatError:
+        previous = read_run_file(path).solution()
+        if previous is None:
+            raise CheckFailed(f"{path} holds no calibration solution") from None
+        return previous
 
 
 def _summary(
