@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from benchmarks import accuracy, memory, spectra_rate, speed
+from benchmarks import accuracy, main_job, memory, spectra_rate, speed
 
 
 def main() -> int:
@@ -32,6 +32,8 @@ def main() -> int:
     speeds = speed.main()
     mem = memory.main()
     rates = spectra_rate.main([])
+    print("=" * 100)
+    main_job.main(["--seeds", "3"])
     print("=" * 100)
     print("SUMMARY (all measured in this run)")
     print("=" * 100)
