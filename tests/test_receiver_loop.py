@@ -140,13 +140,13 @@ def test_engine_recovers_the_simulators_noise_waves_within_the_posterior(measure
     mean = solution.evaluate(freq)
     std = solution.parameter_std(freq)
     z = (mean - truth) / std
-    # Per parameter, the truth sits within the posterior: the RMS of z over the band is
-    # below 3 and no channel is beyond 6 sigma. The z's of one parameter are strongly
-    # correlated along frequency (a few independent values per parameter), and the
-    # effective T_L and T_NS are not exactly polynomials, hence not |z| < 1 everywhere.
+    # Per parameter, the truth sits within the posterior (which includes the thermometry's
+    # error): the RMS of z over the band is below 2.5 and no channel is beyond 4 sigma.
+    # The z's of one parameter are strongly correlated along frequency (a few independent
+    # values per parameter), so a stricter per-channel bound would not be a 1-sigma test.
     rms = np.sqrt(np.mean(z**2, axis=1))
-    assert np.all(rms < 4.0), rms
-    assert np.max(np.abs(z)) < 6.0, np.max(np.abs(z), axis=1)
+    assert np.all(rms < 2.5), rms
+    assert np.max(np.abs(z)) < 4.0, np.max(np.abs(z), axis=1)
     # And the posterior is informative: T_unc, T_cos, T_sin to better than 1 K.
     assert np.max(std[:3]) < 1.0
 
