@@ -75,7 +75,8 @@ class Instruments:
         else:
             raise ConfigError(f"{site.source}: devices.tec needs 'via: teensy' or a 'port'")
         tec = Tec(link, clock)
-        return cls(site, clock, teensy, vna, spectrometer, tc08, link, tec, FrontEnd(teensy))
+        frontend = FrontEnd(teensy, site.sources)
+        return cls(site, clock, teensy, vna, spectrometer, tc08, link, tec, frontend)
 
     def connect(self) -> None:
         """Connect every instrument; on a failure, close those already connected."""

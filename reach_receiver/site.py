@@ -10,6 +10,7 @@ A YAML mapping, safe-loaded, unknown keys rejected with the file and key named::
       tc08: {library: /opt/picotech/lib/libusbtc08.so}
       spectrometer: {host: 0.0.0.0, port: 4660}
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
+    sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
 
 ``reach-sim`` prints one of these with the simulated instruments' addresses and a
 ``simulation`` section (its compressed clock), which ``reach-run`` then shares.
@@ -25,8 +26,9 @@ from typing import Any
 import yaml
 
 from reach_receiver.errors import ConfigError
+from reach_receiver.frontend.layout import REACH_SOURCES, SWITCH_POSITIONS, SourcePosition
 
-_SECTIONS = {"site", "devices", "references", "simulation"}
+_SECTIONS = {"site", "devices", "references", "simulation", "sources"}
 _SIMULATION_KEYS = {"compression", "start", "monotonic_origin"}
 _DEVICE_KEYS: Mapping[str, set[str]] = {
     "teensy": {"port", "timeout_s"},
@@ -47,6 +49,7 @@ class SiteConfig:
     devices: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     references: Mapping[str, str] = field(default_factory=dict)
     simulation: Mapping[str, float] = field(default_factory=dict)
+    sources: Mapping[str, SourcePosition] = field(default_factory=lambda: dict(REACH_SOURCES))
     source: str = "<memory>"
 
     def device(self, name: str) -> Mapping[str, Any]:
@@ -69,6 +72,12 @@ class SiteConfig:
             document["references"] = dict(self.references)
         if self.simulation:
             document["simulation"] = dict(self.simulation)
+        changed: dict[str, dict[str, int] | None] = {
+            k: _position_yaml(v) for k, v in self.sources.items() if REACH_SOURCES.get(k) != v
+        }
+        changed.update({k: None for k in REACH_SOURCES if k not in self.sources})
+        if changed:
+            document["sources"] = changed
         return yaml.safe_dump(document, sort_keys=False)
 
 
@@ -116,6 +125,23 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     except (TypeError, ValueError):
         problems.append("'site.longitude_deg' and 'site.latitude_deg' must be numbers")
         longitude = latitude = 0.0
+    table = dict(REACH_SOURCES)
+    given = document.get("sources") or {}
+    if not isinstance(given, dict):
+        problems.append("'sources' must map source names to switch positions")
+        given = {}
+    for name, where in given.items():
+        if where is None:  # a source this site does not have
+            table.pop(str(name), None)
+            continue
+        position = _parse_position(str(name), where, problems)
+        if position is not None:
+            table[str(name)] = position
+    seen: dict[SourcePosition, str] = {}
+    for name, position in table.items():
+        if position in seen:
+            problems.append(f"sources '{seen[position]}' and '{name}' sit at the same position")
+        seen[position] = name
     if problems:
         raise ConfigError(f"{source}: " + "; ".join(problems))
     return SiteConfig(
@@ -125,8 +151,36 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         devices={k: dict(v) for k, v in devices.items()},
         references=dict(references),
         simulation={k: float(v) for k, v in simulation.items()},
+        sources=table,
         source=source,
     )
+
+
+def _parse_position(name: str, where: object, problems: list[str]) -> SourcePosition | None:
+    """``{ms1: 7, ms3: 2}``: an MS1 position and at most one termination switch."""
+    key = f"sources.{name}"
+    if not isinstance(where, dict) or "ms1" not in where or set(where) - {"ms1", "ms3", "ms4"}:
+        problems.append(f"'{key}' must be {{ms1: <1-8>}} plus at most one of ms3/ms4")
+        return None
+    terminations = [k for k in ("ms3", "ms4") if k in where]
+    values = {k: where[k] for k in ("ms1", *terminations)}
+    for switch, value in values.items():
+        top = SWITCH_POSITIONS[switch]
+        if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= top:
+            problems.append(f"'{key}.{switch}' must be an integer 1-{top}, not {value!r}")
+            return None
+    if len(terminations) > 1:
+        problems.append(f"'{key}' names both ms3 and ms4; a source sits behind one of them")
+        return None
+    termination = (terminations[0], values[terminations[0]]) if terminations else None
+    return SourcePosition(values["ms1"], termination)
+
+
+def _position_yaml(position: SourcePosition) -> dict[str, int]:
+    out = {"ms1": position.ms1}
+    if position.termination is not None:
+        out[position.termination[0]] = position.termination[1]
+    return out
 
 
 def load_site(path: str | Path) -> SiteConfig:

@@ -235,6 +235,8 @@ def compile_text(
     variables = Variables(sources.variables, site, problems)
     name = _header(document, file, variables, problems)
     context = Context(variables, problems, sources.blocks)
+    if site is not None:
+        context.sources = tuple(site.sources)
     steps: list[s.Step] = []
     if "steps" in document:
         steps = compile_steps(document["steps"], file, document.line_of("steps"), "steps", context)
@@ -242,7 +244,7 @@ def compile_text(
         context.using = [block_name]
         compile_steps(block.steps, block.file, block.line, f"blocks.{block_name}", context)
     values = variables.values()
-    problems += interlock_problems(steps)
+    problems += interlock_problems(steps, site.sources if site is not None else None)
     problems += timing_problems(
         steps,
         start_utc=start_utc or datetime.now(timezone.utc),

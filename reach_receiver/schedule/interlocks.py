@@ -22,7 +22,7 @@ could not be read, the state is unknown until the next ``initialise``.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from reach_receiver.devices.teensy import FrontEndState
@@ -33,6 +33,7 @@ from reach_receiver.frontend.layout import (
     SWITCH_POSITIONS,
     SWITCH_RAIL,
     SWITCHABLE_RAILS,
+    SourcePosition,
 )
 from reach_receiver.frontend.paths import FrontEnd, SignalPath
 
@@ -136,7 +137,8 @@ class _Board:
 
 
 class _Checker:
-    def __init__(self) -> None:
+    def __init__(self, planner: FrontEnd) -> None:
+        self.planner = planner
         self.board = _Board()
         self.problems: list[Problem] = []
 
@@ -174,7 +176,7 @@ class _Checker:
             board.forget()
         for source, to in connections(step):
             try:
-                board.apply(PLANNER.path(source, "vna" if to == "vna" else "lna"))
+                board.apply(self.planner.path(source, "vna" if to == "vna" else "lna"))
             except ConfigError:  # an unknown source, already reported
                 board.switches = dict.fromkeys(_SWITCHES)
 
@@ -207,8 +209,13 @@ def _kind(step: s.Step) -> str:
     return names.get(type(step), type(step).__name__.lower())
 
 
-def interlock_problems(steps: Sequence[s.Step]) -> list[Problem]:
-    """Every interlock violation found by walking ``steps`` from an unknown board state."""
-    checker = _Checker()
+def interlock_problems(
+    steps: Sequence[s.Step], sources: Mapping[str, SourcePosition] | None = None
+) -> list[Problem]:
+    """Every interlock violation found by walking ``steps`` from an unknown board state.
+
+    ``sources`` is the site's source table (table A.2 by default).
+    """
+    checker = _Checker(FrontEnd(_NoBoard(), sources) if sources is not None else PLANNER)
     checker.walk(steps)
     return checker.problems

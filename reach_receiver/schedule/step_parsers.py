@@ -33,8 +33,6 @@ from .variables import UNRESOLVED, Variables
 from .yaml_lines import LineDict, LineList, Problem
 
 SOURCES: tuple[str, ...] = tuple(REACH_SOURCES)
-VNA_TARGETS: tuple[str, ...] = (*SOURCES, "lna", *VNA_STANDARDS)
-S11_TARGETS: tuple[str, ...] = (*SOURCES, "lna")
 SWEEP_KEYS: tuple[str, ...] = tuple(f.name for f in fields(s.Sweep))
 WAIT_STABLE_KEYS: tuple[str, ...] = tuple(f.name for f in fields(s.WaitStable))
 TEC_RANGE_C = (5.0, 45.0)
@@ -57,6 +55,17 @@ class Context:
     problems: list[Problem]
     blocks: dict[str, Block] = field(default_factory=dict)
     using: list[str] = field(default_factory=list)
+    sources: tuple[str, ...] = SOURCES
+
+    @property
+    def vna_targets(self) -> tuple[str, ...]:
+        """What a connection to the VNA may name: sources, the LNA, the standards."""
+        return (*self.sources, "lna", *VNA_STANDARDS)
+
+    @property
+    def s11_targets(self) -> tuple[str, ...]:
+        """What an ``s11`` step may measure."""
+        return (*self.sources, "lna")
 
     def path(self, file: str, text: str) -> Path:
         """A path written in ``file``, relative to that file's directory."""
@@ -110,7 +119,7 @@ def _power(f: Fields, where: s.Where, ctx: Context) -> s.Step:
 def _connect(f: Fields, where: s.Where, ctx: Context) -> s.Step:
     to = f.choice("to", ("lna", "vna"), "lna") or "lna"
     source = f.text("source")
-    known = VNA_TARGETS if to == "vna" else SOURCES
+    known = ctx.vna_targets if to == "vna" else ctx.sources
     if source is not None and source not in known:
         f.report(
             "source",
@@ -159,16 +168,16 @@ def _test_load_check(f: Fields, where: s.Where, ctx: Context) -> s.Step:
 
 
 def _s11(f: Fields, where: s.Where, ctx: Context) -> s.Step:
-    return s.MeasureS11(where, tuple(f.names("targets", S11_TARGETS, "S11 target")))
+    return s.MeasureS11(where, tuple(f.names("targets", ctx.s11_targets, "S11 target")))
 
 
 def _spectrum(f: Fields, where: s.Where, ctx: Context) -> s.Step:
-    source = f.choice("source", SOURCES) or ""
+    source = f.choice("source", ctx.sources) or ""
     return s.MeasureSpectrum(where, source, f.seconds("seconds"))
 
 
 def _dicke(f: Fields, where: s.Where, ctx: Context) -> s.Step:
-    sources = f.names("sources", SOURCES, "source")
+    sources = f.names("sources", ctx.sources, "source")
     return s.Dicke(where, tuple(sources), f.seconds("seconds"))
 
 
@@ -265,7 +274,7 @@ def _observe(f: Fields, where: s.Where, ctx: Context) -> s.Step:
         where,
         cycles=f.count("cycles"),
         seconds=f.seconds("seconds"),
-        source=f.choice("source", SOURCES, "ant") or "ant",
+        source=f.choice("source", ctx.sources, "ant") or "ant",
         test_load_every=f.count("test_load_every", 6),
         rfi_threshold_sigma=f.number("rfi_threshold_sigma", 5.0, low=0.0, open_low=True),
     )
