@@ -83,7 +83,11 @@ def ensure_built(firmware_dir: Path = FIRMWARE_DIR, timeout_s: float = 300.0) ->
     """
     binary = simulator_binary(firmware_dir)
     if not (firmware_dir / "Makefile").exists():
-        raise ReceiverError(f"{DEVICE}: no firmware sources at {firmware_dir}")
+        raise ReceiverError(
+            f"{DEVICE}: no firmware sources at {firmware_dir}: the simulated Teensy is the "
+            "firmware's host build, so the simulator runs from a source checkout installed "
+            "with 'pip install -e .'"
+        )
     binary.parent.mkdir(parents=True, exist_ok=True)
     # A thread lock within this process, a file lock between processes (parallel tests).
     with _build_lock, open(binary.parent / ".teensy-sim.lock", "w") as lock:
