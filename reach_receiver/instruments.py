@@ -41,6 +41,8 @@ class Instruments:
     tec: Tec
     frontend: FrontEnd
     _stack: ExitStack = field(default_factory=ExitStack)
+    connected: bool = False
+    tec_connected: bool = False
 
     @classmethod
     def from_site(cls, site: SiteConfig, clock: Clock) -> Instruments:
@@ -79,7 +81,9 @@ class Instruments:
         return cls(site, clock, teensy, vna, spectrometer, tc08, link, tec, frontend)
 
     def connect(self) -> None:
-        """Connect every instrument; on a failure, close those already connected."""
+        """Connect every instrument (once); on a failure, close those already connected."""
+        if self.connected:
+            return
         with ExitStack() as stack:
             for name, device in (
                 ("teensy", self.teensy),
@@ -91,15 +95,20 @@ class Instruments:
                 device.connect()
                 stack.callback(device.close)
             self._stack = stack.pop_all()
+        self.connected = True
 
     def connect_tec(self) -> None:
-        """Connect the TEC controller (its rail must be on when it sits behind the Teensy)."""
+        """Connect the TEC controller once (behind the Teensy, its rail must be on)."""
+        if self.tec_connected:
+            return
         self.tec.connect()
         self._stack.callback(self.tec.close)
+        self.tec_connected = True
 
     def close(self) -> None:
         """Close every connected instrument (the front-end keeps its state)."""
         self._stack.close()
+        self.connected = self.tec_connected = False
 
 
 class _LazyLibrary:

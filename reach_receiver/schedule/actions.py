@@ -132,6 +132,7 @@ class Actions:
 
     def tec(self, step: st.Tec) -> None:
         """Set the enclosure temperature and, if asked, wait until it is stable."""
+        self.instruments.connect_tec()
         tec = self.instruments.tec
         tec.set_setpoint(step.setpoint_c)
         if step.wait is not None:
