@@ -248,12 +248,17 @@ def source_data(
     channels: slice,
     spectrometer_input: int = 0,
     known_temperature: bool = True,
+    thermocouple: int | None = None,
 ) -> SourceData:
-    """The engine's view of one source: S11 at the channels, Dicke powers, temperature."""
+    """The engine's view of one source: S11 at the channels, Dicke powers, temperature.
+
+    The temperature is the mean of TC-08 port ``thermocouple`` (table 2.2's port of the
+    source by default) during the source's own integration.
+    """
     spectra = {k: v.mean[spectrometer_input, channels] for k, v in cycle.spectra.items()}
     temperature, temperature_std = None, 0.0
     if known_temperature:
-        port = SOURCE_THERMOCOUPLE[cycle.source]
+        port = SOURCE_THERMOCOUPLE[cycle.source] if thermocouple is None else thermocouple
         temperature = np.full(freq_hz.shape, cycle.temperature_k(port))
         temperature_std = cycle.temperature_std_k(port)
     return SourceData(

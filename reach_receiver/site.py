@@ -11,6 +11,7 @@ A YAML mapping, safe-loaded, unknown keys rejected with the file and key named::
       spectrometer: {host: 0.0.0.0, port: 4660}
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
+    thermocouples: {hot: 2}                 # source -> TC-08 port, changes to table 2.2
 
 ``reach-sim`` prints one of these with the simulated instruments' addresses and a
 ``simulation`` section (its compressed clock), which ``reach-run`` then shares.
@@ -26,9 +27,14 @@ from typing import Any
 import yaml
 
 from reach_receiver.errors import ConfigError
-from reach_receiver.frontend.layout import REACH_SOURCES, SWITCH_POSITIONS, SourcePosition
+from reach_receiver.frontend.layout import (
+    REACH_SOURCES,
+    SOURCE_THERMOCOUPLE,
+    SWITCH_POSITIONS,
+    SourcePosition,
+)
 
-_SECTIONS = {"site", "devices", "references", "simulation", "sources"}
+_SECTIONS = {"site", "devices", "references", "simulation", "sources", "thermocouples"}
 _SIMULATION_KEYS = {"compression", "start", "monotonic_origin"}
 _DEVICE_KEYS: Mapping[str, set[str]] = {
     "teensy": {"port", "timeout_s"},
@@ -50,6 +56,7 @@ class SiteConfig:
     references: Mapping[str, str] = field(default_factory=dict)
     simulation: Mapping[str, float] = field(default_factory=dict)
     sources: Mapping[str, SourcePosition] = field(default_factory=lambda: dict(REACH_SOURCES))
+    thermocouples: Mapping[str, int] = field(default_factory=lambda: dict(SOURCE_THERMOCOUPLE))
     source: str = "<memory>"
 
     def device(self, name: str) -> Mapping[str, Any]:
@@ -78,6 +85,9 @@ class SiteConfig:
         changed.update({k: None for k in REACH_SOURCES if k not in self.sources})
         if changed:
             document["sources"] = changed
+        ports = {k: v for k, v in self.thermocouples.items() if SOURCE_THERMOCOUPLE.get(k) != v}
+        if ports:
+            document["thermocouples"] = ports
         return yaml.safe_dump(document, sort_keys=False)
 
 
@@ -137,6 +147,16 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         position = _parse_position(str(name), where, problems)
         if position is not None:
             table[str(name)] = position
+    ports = dict(SOURCE_THERMOCOUPLE)
+    given_ports = document.get("thermocouples") or {}
+    if not isinstance(given_ports, dict):
+        problems.append("'thermocouples' must map source names to TC-08 ports 1-8")
+        given_ports = {}
+    for name, port in given_ports.items():
+        if not isinstance(port, int) or isinstance(port, bool) or not 1 <= port <= 8:
+            problems.append(f"'thermocouples.{name}' must be a TC-08 port 1-8, not {port!r}")
+        else:
+            ports[str(name)] = port
     seen: dict[SourcePosition, str] = {}
     for name, position in table.items():
         if position in seen:
@@ -152,6 +172,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         references=dict(references),
         simulation={k: float(v) for k, v in simulation.items()},
         sources=table,
+        thermocouples=ports,
         source=source,
     )
 

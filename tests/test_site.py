@@ -90,3 +90,21 @@ def test_site_sources_reach_the_front_end_and_the_compiler():
     schedule = compile_text(text, "s.yaml", site=site)
     assert len(schedule.steps) == 2
     assert REACH_SOURCES["ant"] == SourcePosition(1)  # the default table is untouched
+
+
+def test_thermocouple_ports_follow_table_2_2_unless_the_site_says_otherwise(tmp_path):
+    site = parse_site(
+        {
+            "devices": DEVICES,
+            "sources": {"c10r250": None, "spare": {"ms1": 8, "ms4": 4}},
+            "thermocouples": {"spare": 4, "hot": 7},
+        }
+    )
+    assert site.thermocouples["spare"] == 4
+    assert site.thermocouples["hot"] == 7
+    assert site.thermocouples["cold"] == 1  # table 2.2
+    path = tmp_path / "site.yaml"
+    path.write_text(site.to_yaml())
+    assert load_site(path).thermocouples == site.thermocouples
+    with pytest.raises(ConfigError, match="thermocouples.hot' must be a TC-08 port 1-8"):
+        parse_site({"devices": DEVICES, "thermocouples": {"hot": 9}})

@@ -27,7 +27,7 @@ from reach_receiver.acquire import (
 from reach_receiver.clock import Clock
 from reach_receiver.devices.vna import S11Measurement, SweepSettings
 from reach_receiver.errors import ConfigError, ReceiverError
-from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD, SOURCE_THERMOCOUPLE
+from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD
 from reach_receiver.instruments import Instruments
 from reach_receiver.schedule import steps as st
 from reach_receiver.schedule.checks import compare_test_load
@@ -250,7 +250,8 @@ class Actions:
             self.temperatures,
         )
         self.cycles.setdefault(source, []).append(cycle)
-        temperature, temperature_std = _source_temperature(cycle)
+        port = self.instruments.site.thermocouples.get(source)
+        temperature, temperature_std = _source_temperature(cycle, port)
         connects = {"source": source, "load": REFERENCE_LOAD, "ns": NOISE_SOURCE}
         self.store.add_dicke(
             source,
@@ -274,9 +275,8 @@ class Actions:
         return cycle
 
 
-def _source_temperature(cycle: DickeCycle) -> tuple[float | None, float]:
+def _source_temperature(cycle: DickeCycle, port: int | None) -> tuple[float | None, float]:
     """The source's mean thermocouple temperature during its integration and its error (K)."""
-    port = SOURCE_THERMOCOUPLE.get(cycle.source)
     if port is None or not cycle.temperatures.get("source"):
         return None, 0.0
     try:

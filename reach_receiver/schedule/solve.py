@@ -30,7 +30,6 @@ from calibration.noise_waves import design_terms, source_temperature
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
 from calibration.solution import Solution
 from reach_receiver.acquire import band_channels, interpolate_s11, source_data
-from reach_receiver.frontend.layout import SOURCE_THERMOCOUPLE
 from reach_receiver.schedule import steps as st
 from reach_receiver.schedule.actions import VALIDATION_SOURCE, Actions, CheckFailed, CheckRecord
 from reach_receiver.schedule.checks import compare_with_benchmark, rfi_flags
@@ -48,16 +47,24 @@ def run_data(
     channels, freq = band_channels(ITPM_CHANNEL_WIDTH_HZ, f_lo_hz, f_hi_hz)
     calibrators: dict[str, SourceData] = {}
     others: dict[str, SourceData] = {}
+    ports = actions.instruments.site.thermocouples
     for name, cycles in actions.cycles.items():
         if name not in actions.s11:
             log.warning("calibrate: %s has spectra but no S11; left out", name)
             continue
         known = (
             name != VALIDATION_SOURCE
-            and name in SOURCE_THERMOCOUPLE
+            and name in ports
             and bool(cycles[-1].temperatures.get("source"))
         )
-        source = source_data(cycles[-1], actions.s11[name], freq, channels, known_temperature=known)
+        source = source_data(
+            cycles[-1],
+            actions.s11[name],
+            freq,
+            channels,
+            known_temperature=known,
+            thermocouple=ports.get(name),
+        )
         (calibrators if known else others)[name] = source
     if len(calibrators) < 2:
         raise CheckFailed(
