@@ -70,3 +70,19 @@ def test_reach_run_follows_a_reach_sim_in_another_process(reach_sim, tmp_path, c
     assert "distance to floor" in printed
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=20) == 0
+
+
+def test_the_i2c_sensors_follow_the_enclosure():
+    from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
+
+    # A slow enclosure (tau 10 h) starting 10 K above the TEC's 25 C setpoint.
+    settings = SimulationSettings(enclosure_start_c=35.0, tec_tau_s=36000.0)
+    with SimulatedReceiver(settings) as sim, Teensy(sim.site().device("teensy")["port"]) as teensy:
+        first = teensy.temperatures()[0x18]
+        deadline = time.monotonic() + 30
+        later = first
+        while later > first - 0.5 and time.monotonic() < deadline:
+            time.sleep(0.05)  # polling the sensors, a few simulated minutes each time
+            later = teensy.temperatures()[0x18]
+    assert first > 30.0
+    assert later <= first - 0.5

@@ -106,5 +106,5 @@ def test_thermocouple_ports_follow_table_2_2_unless_the_site_says_otherwise(tmp_
     path = tmp_path / "site.yaml"
     path.write_text(site.to_yaml())
     assert load_site(path).thermocouples == site.thermocouples
-    with pytest.raises(ConfigError, match="thermocouples.hot' must be a TC-08 port 1-8"):
+    with pytest.raises(ConfigError, match=r"thermocouples\.hot' must be a TC-08 port 1-8"):
         parse_site({"devices": DEVICES, "thermocouples": {"hot": 9}})

@@ -23,12 +23,14 @@ from __future__ import annotations
 import logging
 import socket
 import tempfile
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from reach_receiver.clock import Clock, CompressedClock
+from reach_receiver.errors import ReceiverError
 from reach_receiver.sim.itpm import ItpmSimulator
 from reach_receiver.sim.physics import PhysicsConfig, ReceiverPhysics
 from reach_receiver.sim.tc08_standin import Tc08StandIn
@@ -122,6 +124,8 @@ class SimulatedReceiver:
         self.teensy: FirmwareTeensy | None = None
         self.tc08: Tc08StandIn | None = None
         self.test_load_reference = self.workdir / "test_load_reference.s1p"
+        self._stop = threading.Event()
+        self._sensor_thread: threading.Thread | None = None
         self._started = False
 
     def start(self) -> SiteConfig:
@@ -132,8 +136,12 @@ class SimulatedReceiver:
         self.teensy.on_change(self.physics.update_pins)
         self.physics.sync_pins = self.teensy.sync
         self.physics.update_pins(self.teensy.state)
-        for address, celsius in self.physics.mcp9808_c().items():
-            self.teensy.set_sensor(address, celsius)
+        self._refresh_sensors()
+        self._stop.clear()
+        self._sensor_thread = threading.Thread(
+            target=self._follow_enclosure, name="mcp9808-sim", daemon=True
+        )
+        self._sensor_thread.start()
         self.vna.start()
         self.itpm.start()
         self.tc08 = Tc08StandIn(self.workdir / "tc08", self.physics.thermocouples_c, self.clock)
@@ -142,6 +150,24 @@ class SimulatedReceiver:
         self._started = True
         log.info("simulated receiver started: %s", self.site().devices)
         return self.site()
+
+    def _refresh_sensors(self) -> None:
+        if self.teensy is not None:
+            for address, celsius in self.physics.mcp9808_c().items():
+                self.teensy.set_sensor(address, celsius)
+
+    def _follow_enclosure(self) -> None:
+        """Keep the simulated MCP9808s on the enclosure's temperature (every 10 sim minutes)."""
+        simulated_s = 600.0
+        clock = self.clock
+        real_s = simulated_s
+        if isinstance(clock, CompressedClock):
+            real_s = clock.real_seconds(simulated_s)
+        while not self._stop.wait(real_s):
+            try:
+                self._refresh_sensors()
+            except ReceiverError:  # the firmware is shutting down
+                return
 
     def _write_test_load_reference(self) -> Path:
         """The lab (PNA-X) measurement of the MS2-6 test load, as a Touchstone file.
@@ -186,6 +212,10 @@ class SimulatedReceiver:
 
     def close(self) -> None:
         """Stop every simulator (in reverse order of start) and remove temporary files."""
+        self._stop.set()
+        if self._sensor_thread is not None:
+            self._sensor_thread.join(timeout=5)
+            self._sensor_thread = None
         for stop in (
             self.tc08.close if self.tc08 else None,
             self.itpm.stop,
