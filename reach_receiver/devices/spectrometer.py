@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -425,7 +426,12 @@ class Spectrometer:
         return drained
 
     def integrate(
-        self, n_spectra: int, *, discard: int = 1, timeout_s: float | None = None
+        self,
+        n_spectra: int,
+        *,
+        discard: int = 1,
+        timeout_s: float | None = None,
+        on_spectrum: Callable[[int, int], None] | None = None,
     ) -> AccumulatedSpectrum:
         """Average the next ``n_spectra`` complete spectra after dropping ``discard``.
 
@@ -443,6 +449,10 @@ class Spectrometer:
         timeout_s
             Real-time deadline of the whole integration; each spectrum must in any case
             arrive within the driver's ``timeout_s`` of the previous one.
+        on_spectrum
+            Called as ``on_spectrum(averaged, n_spectra)`` after each averaged spectrum:
+            progress for the operator, and the place where a caller may stop a long
+            integration by raising (the exception propagates unchanged).
 
         Raises
         ------
@@ -479,6 +489,8 @@ class Spectrometer:
                 continue
             total += spectrum.data
             timestamps.append(spectrum.timestamp)
+            if on_spectrum is not None:
+                on_spectrum(len(timestamps), n_spectra)
         after = self.statistics
         return AccumulatedSpectrum(
             mean=total / n_spectra,

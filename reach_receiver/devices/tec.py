@@ -244,12 +244,19 @@ class Tec:
         self._set_and_verify("a", values, lambda reply: integer_field(reply[0]) == target)
 
     def wait_until_stable(
-        self, tolerance_c: float, hold_s: float, timeout_s: float, poll_s: float = 10.0
+        self,
+        tolerance_c: float,
+        hold_s: float,
+        timeout_s: float,
+        poll_s: float = 10.0,
+        on_poll: Callable[[TecStatus], None] | None = None,
     ) -> TecStatus:
         """Poll the status until ``|temperature - setpoint| <= tolerance_c`` for ``hold_s``.
 
         All durations are in the injected clock's time. The temperature must stay
         within tolerance, with control on, at every poll of the hold period.
+        ``on_poll(status)`` is called after each poll (progress, or a caller's stop by
+        raising).
 
         Returns
         -------
@@ -288,6 +295,8 @@ class Tec:
                     f"controlled {status.controlled})"
                 )
                 raise DeviceTimeout(self.name, message, "j")
+            if on_poll is not None:
+                on_poll(status)
             self.clock.sleep(min(poll_s, max(deadline - now, 0.0)))
 
     # -- exchanges with retries -------------------------------------------------------

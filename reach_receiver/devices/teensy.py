@@ -13,28 +13,26 @@ from __future__ import annotations
 import itertools
 import logging
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass
-from types import MappingProxyType
 
+from reach_receiver.devices.board import (
+    DEVICE,
+    FIXED_RAILS,
+    MTS_STATES,
+    SWITCH_POSITIONS,
+    SWITCHABLE_RAILS,
+    FrontEndState,
+)
 from reach_receiver.errors import (
     DeviceError,
     DeviceTimeout,
     InterlockError,
     ProtocolError,
 )
-from reach_receiver.frontend.layout import (
-    FIXED_RAILS,
-    MTS_STATES,
-    SWITCH_POSITIONS,
-    SWITCHABLE_RAILS,
-)
 from reach_receiver.transports.serial_port import SerialTransport
 
 log = logging.getLogger(__name__)
 
 PROTOCOL_VERSION = 1
-DEVICE = "teensy"
 
 #: Interlock refusals (PROTOCOL.md, "Interlocks"): the board said no on safety grounds.
 INTERLOCK_CODES = frozenset({20, 21, 22})
@@ -49,46 +47,6 @@ class TeensyError(DeviceError):
         self.code = code
         self.reason = reason
         super().__init__(DEVICE, f"ERR {code:02d} {reason}", command)
-
-
-@dataclass(frozen=True)
-class FrontEndState:
-    """The board's outputs as ``state`` reports them.
-
-    ``switches`` maps ``ms1``-``ms4`` to positions (0 = released) and ``mts`` to
-    ``"lna"`` or ``"vna"``; ``rails`` maps each switchable rail to on/off.
-    """
-
-    switches: Mapping[str, int | str]
-    rails: Mapping[str, bool]
-    boot: str
-    uptime_ms: int
-
-    @classmethod
-    def parse(cls, payload: str) -> FrontEndState:
-        """Read a ``state`` payload, ``ms1=4 ms2=0 ... boot=por uptime_ms=1234``."""
-        fields = dict(item.split("=", 1) for item in payload.split() if "=" in item)
-        try:
-            switches: dict[str, int | str] = {s: int(fields[s]) for s in SWITCH_POSITIONS}
-            switches["mts"] = fields["mts"]
-            rails = {r: fields[r] == "1" for r in SWITCHABLE_RAILS}
-            state = cls(
-                MappingProxyType(switches),
-                MappingProxyType(rails),
-                fields["boot"],
-                int(fields["uptime_ms"]),
-            )
-        except (KeyError, ValueError) as err:
-            raise ProtocolError(DEVICE, f"malformed state reply {payload!r}", "state") from err
-        if switches["mts"] not in MTS_STATES:
-            raise ProtocolError(DEVICE, f"unknown MTS state in {payload!r}", "state")
-        return state
-
-    def as_pins(self) -> dict[str, str]:
-        """The state in the firmware's own ``name=value`` strings."""
-        out = {name: str(value) for name, value in self.switches.items()}
-        out.update({rail: "1" if on else "0" for rail, on in self.rails.items()})
-        return out
 
 
 class Teensy:

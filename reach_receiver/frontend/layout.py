@@ -12,23 +12,37 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
-#: Number of positions of each single-pole switch (table A.2); 0 means released.
-SWITCH_POSITIONS: Mapping[str, int] = MappingProxyType({"ms1": 8, "ms2": 6, "ms3": 4, "ms4": 4})
+# The board's own names (the firmware protocol), re-exported with the front-end's facts.
+from reach_receiver.devices.board import (
+    FIXED_RAILS,
+    MTS_STATES,
+    SWITCH_POSITIONS,
+    SWITCHABLE_RAILS,
+)
 
-#: The transfer switch's two states: sources to the LNA, or sources and LNA to the VNA.
-MTS_STATES: tuple[str, str] = ("lna", "vna")
+__all__ = [
+    "FIXED_RAILS",
+    "MS2_TO_LNA",
+    "MS2_TO_SOURCES",
+    "MTS_STATES",
+    "NOISE_SOURCE",
+    "REACH_SOURCES",
+    "REFERENCE_LOAD",
+    "SOURCE_THERMOCOUPLE",
+    "SWITCHABLE_RAILS",
+    "SWITCH_POSITIONS",
+    "SWITCH_RAIL",
+    "TC08_PORTS",
+    "VNA_STANDARDS",
+    "SourcePosition",
+    "source_at",
+]
 
 #: The rail that drives each switch (table A.1: MS1 12 V, MS2 and MTS 24 V; MS3 and MS4
 #: are taken as 12 V parts, their model records being lost).
 SWITCH_RAIL: Mapping[str, str] = MappingProxyType(
     {"ms1": "12v", "ms2": "24v", "ms3": "12v", "ms4": "12v", "mts": "24v"}
 )
-
-#: Rails the microcontroller may switch (table A.3, fig. 2.42); ``6v`` feeds the LNA.
-SWITCHABLE_RAILS: tuple[str, ...] = ("6v", "12v", "24v", "ns", "fan", "tec")
-
-#: Rails that are never switched: switching 5 V off loses the instrument (table A.3).
-FIXED_RAILS: tuple[str, ...] = ("3v3", "5v")
 
 #: MS2 positions (table A.2): the two VNA paths and the VNA's standards.
 MS2_TO_SOURCES = 1

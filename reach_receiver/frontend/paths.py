@@ -2,8 +2,8 @@
 
 The front-end model knows the contents of every switch position (:mod:`.layout`, table
 A.2) and the safety rules (table A.3, fig. 2.42); it talks to the board through the small
-:class:`SwitchMatrix` protocol, which the Teensy driver implements. Rules are checked
-here before any command is sent, and again by the firmware:
+:class:`~reach_receiver.devices.protocols.SwitchMatrix` protocol, which the Teensy driver
+implements. Rules are checked here before any command is sent, and again by the firmware:
 
 * a switch moves only while its drive rail is on, so :meth:`FrontEnd.connect` powers the
   rails a path needs before it moves anything;
@@ -21,9 +21,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal
 
-from reach_receiver.devices.teensy import FrontEndState
+from reach_receiver.devices.board import FrontEndState
+from reach_receiver.devices.protocols import SwitchMatrix
 from reach_receiver.errors import ConfigError, InterlockError
 
 from .layout import (
@@ -39,26 +40,6 @@ from .layout import (
 log = logging.getLogger(__name__)
 
 Destination = Literal["lna", "vna"]
-
-
-class SwitchMatrix(Protocol):
-    """What the front-end model needs of the microcontroller."""
-
-    def select(self, switch: str, position: int | str) -> None:
-        """Drive one switch."""
-        ...
-
-    def set_rail(self, rail: str, on: bool) -> None:
-        """Switch one rail."""
-        ...
-
-    def read_state(self) -> FrontEndState:
-        """Read every output back."""
-        ...
-
-    def safe(self) -> FrontEndState:
-        """Go to the safe state."""
-        ...
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from reach_receiver.devices.teensy import FrontEndState
+from reach_receiver.devices.board import FrontEndState
 from reach_receiver.errors import ConfigError, InterlockError
 from reach_receiver.frontend.layout import (
     NOISE_SOURCE,
