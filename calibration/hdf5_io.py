@@ -48,6 +48,7 @@ import json
 import os
 import tempfile
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 from typing import Any
@@ -294,30 +295,76 @@ def read_run(path: PathLike) -> tuple[CalibrationData, dict[str, SourceData]]:
     2-D spectra are averaged over their first axis (module docstring).
     """
     with _open(path, RUN_FORMATS) as f:
-        obs = _group(f, "observation_data", path)
-        meta = _group(f, "observation_metadata", path)
-        temps = _group(meta, "temperatures", path)
-        freq = _array(obs, "frequencies", path).astype(float)
-        gamma_rec = _array(obs, "lna_s11", path, "iufc").astype(complex)
-        width = float(_attr(meta, "channel_width_hz", path))
-        discovered = sorted(k[:-4] for k in obs if k.endswith("_s11") and k != "lna_s11")
-        names = _names(meta, "sources") or discovered
-        calibrators = _names(meta, "calibrators") or [n for n in names if n in temps]
-        missing = [n for n in calibrators if n not in names]
-        if missing:
-            raise FileFormatError(f"{path}: calibrators {missing} have no data")
-        run_metadata = _metadata(f, path)
+        return read_run_group(f, path)
+
+
+@dataclass(frozen=True)
+class RunLayout:
+    """A run layout as read: the axis, the receiver, every source and which calibrate.
+
+    ``sources`` holds every source (calibrators and others, e.g. ``ant``) by name.
+    """
+
+    freq_hz: NDArray[np.float64]
+    gamma_rec: NDArray[np.complex128]
+    channel_width_hz: float
+    sources: Mapping[str, SourceData]
+    calibrators: tuple[str, ...]
+    metadata: Mapping[str, Any]
+    path: str
+
+    def split(self) -> tuple[CalibrationData, dict[str, SourceData]]:
+        """The calibrators as a checked run, and the other sources (checked) by name."""
         try:
-            sources = {n: _read_source(obs, meta, temps, n, path) for n in names}
+            cals = {n: self.sources[n] for n in self.calibrators}
+            data = CalibrationData(
+                self.freq_hz, self.gamma_rec, cals, self.channel_width_hz, self.metadata
+            )
+            return data, self.others()
         except InvalidDataError as err:
-            raise _in_file(err, path) from err
+            raise _in_file(err, self.path) from err
+
+    def others(self) -> dict[str, SourceData]:
+        """The sources that are not calibrators, checked against the axis."""
+        n = self.freq_hz.size
+        try:
+            return {
+                k: check_source(s, n) for k, s in self.sources.items() if k not in self.calibrators
+            }
+        except InvalidDataError as err:
+            raise _in_file(err, self.path) from err
+
+
+def read_run_group(f: Any, path: PathLike) -> tuple[CalibrationData, dict[str, SourceData]]:
+    """Read the run layout of an open HDF5 file (``path`` names it in errors).
+
+    What :func:`read_run` does after opening and checking the file; the receiver's run
+    store uses it on a layout built in memory, so that the calibration made during a
+    run and ``reach-cal solve`` on the run file read their data the same way.
+    """
+    return read_run_layout(f, path).split()
+
+
+def read_run_layout(f: Any, path: PathLike) -> RunLayout:
+    """Every source of an open run layout, before it is split into calibrators and others."""
+    obs = _group(f, "observation_data", path)
+    meta = _group(f, "observation_metadata", path)
+    temps = _group(meta, "temperatures", path)
+    freq = _array(obs, "frequencies", path).astype(float)
+    gamma_rec = _array(obs, "lna_s11", path, "iufc").astype(complex)
+    width = float(_attr(meta, "channel_width_hz", path))
+    discovered = sorted(k[:-4] for k in obs if k.endswith("_s11") and k != "lna_s11")
+    names = _names(meta, "sources") or discovered
+    calibrators = _names(meta, "calibrators") or [n for n in names if n in temps]
+    missing = [n for n in calibrators if n not in names]
+    if missing:
+        raise FileFormatError(f"{path}: calibrators {missing} have no data")
+    run_metadata = _metadata(f, path)
     try:
-        cals = {n: sources[n] for n in calibrators}
-        data = CalibrationData(freq, gamma_rec, cals, width, run_metadata)
-        n = data.n_channels
-        return data, {k: check_source(s, n) for k, s in sources.items() if k not in cals}
+        sources = {n: _read_source(obs, meta, temps, n, path) for n in names}
     except InvalidDataError as err:
         raise _in_file(err, path) from err
+    return RunLayout(freq, gamma_rec, width, sources, tuple(calibrators), run_metadata, str(path))
 
 
 def _basis(obj: Any, path: PathLike, prefix: str = "") -> PolynomialBasis:

@@ -25,6 +25,10 @@ class Clock(Protocol):
         """Wait ``seconds`` of this clock's time."""
         ...
 
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        """Wait up to ``seconds`` of this clock's time for ``event``; whether it is set."""
+        ...
+
 
 class SystemClock:
     """The wall clock."""
@@ -37,6 +41,10 @@ class SystemClock:
         """Wait for real."""
         if seconds > 0:
             time.sleep(seconds)
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        """Wait for real, until ``event`` is set or ``seconds`` have passed."""
+        return event.wait(max(seconds, 0.0))
 
 
 class CompressedClock:
@@ -85,6 +93,10 @@ class CompressedClock:
         if seconds > 0:
             time.sleep(seconds / self.factor)
 
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        """Wait up to ``seconds`` of simulated time for ``event``."""
+        return event.wait(max(seconds, 0.0) / self.factor)
+
     def real_seconds(self, simulated_s: float) -> float:
         """Real seconds that ``simulated_s`` of this clock's time take."""
         return simulated_s / self.factor
@@ -109,6 +121,12 @@ class ManualClock:
     def sleep(self, seconds: float) -> None:
         """Advance the time by ``seconds`` immediately."""
         self.advance(max(seconds, 0.0))
+
+    def wait(self, event: threading.Event, seconds: float) -> bool:
+        """Advance by ``seconds`` unless ``event`` is already set; whether it is set."""
+        if not event.is_set():
+            self.advance(max(seconds, 0.0))
+        return event.is_set()
 
     def advance(self, seconds: float) -> None:
         """Move the clock forward."""

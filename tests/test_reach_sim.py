@@ -10,12 +10,12 @@ import pytest
 
 from reach_receiver.cli import run_main
 from reach_receiver.clock import SystemClock
+from reach_receiver.config.site import load_site
 from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.tc08 import Tc08
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.devices.vna import Vna
 from reach_receiver.sim.receiver import free_udp_port
-from reach_receiver.site import load_site
 from reach_receiver.transports.tc08_library import load_libusbtc08
 
 
@@ -45,15 +45,16 @@ def test_reach_sim_serves_its_site_file_and_stops_cleanly(reach_sim):
     assert site_file.exists(), process.stderr.read() if process.poll() is not None else "no site"
     site = load_site(site_file)
     clock = SystemClock()
-    with Teensy(site.device("teensy")["port"]) as teensy:
+    devices = site.devices
+    with Teensy(devices.teensy.port) as teensy:
         assert teensy.read_state().boot == "por"
-    with Vna(site.device("vna")["resource"]) as vna:
+    with Vna(devices.vna.resource) as vna:
         assert "TR1300" in vna.connect()
-    spectrometer = site.device("spectrometer")
-    with Spectrometer((spectrometer["host"], spectrometer["port"]), clock=clock) as itpm:
+    spectrometer = devices.spectrometer
+    with Spectrometer((spectrometer.host, spectrometer.port), clock=clock) as itpm:
         spectrum = itpm.read_spectrum(timeout_s=10.0)
         assert spectrum.data.shape == (2, 16384)
-    with Tc08(load_libusbtc08(site.device("tc08")["library"]), clock) as tc08:
+    with Tc08(load_libusbtc08(devices.tc08.library), clock) as tc08:
         assert 20.0 < tc08.read().temperatures_c[1] < 30.0
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=20) == 0
@@ -77,7 +78,7 @@ def test_the_i2c_sensors_follow_the_enclosure():
 
     # A slow enclosure (tau 10 h) starting 10 K above the TEC's 25 C setpoint.
     settings = SimulationSettings(enclosure_start_c=35.0, tec_tau_s=36000.0)
-    with SimulatedReceiver(settings) as sim, Teensy(sim.site().device("teensy")["port"]) as teensy:
+    with SimulatedReceiver(settings) as sim, Teensy(sim.site().devices.teensy.port) as teensy:
         first = teensy.temperatures()[0x18]
         deadline = time.monotonic() + 30
         later = first

@@ -11,24 +11,24 @@ than real time; each Dicke position integrates 600 simulated seconds (5 spectra 
 import numpy as np
 import pytest
 
-from calibration import CalibrationData, solve_radiometric
+from calibration import solve_radiometric
 from calibration.simulate import REACH_CALIBRATORS
-from reach_receiver.acquire import (
-    TemperatureLogger,
-    band_channels,
-    interpolate_s11,
-    source_data,
-    take_dicke_cycle,
-    take_s11,
-)
 from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.tc08 import Tc08
 from reach_receiver.devices.tec import Tec
 from reach_receiver.devices.tec_via_teensy import TeensyTecLink
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.devices.vna import SweepSettings, Vna
+from reach_receiver.frontend.layout import SOURCE_THERMOCOUPLE
 from reach_receiver.frontend.paths import FrontEnd
+from reach_receiver.run.measure import (
+    TemperatureLogger,
+    source_temperature,
+    take_dicke_cycle,
+    take_s11,
+)
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
+from reach_receiver.store import RunStore
 from reach_receiver.transports.tc08_library import load_libusbtc08
 
 SPECTRA_PER_POSITION = 5
@@ -42,19 +42,19 @@ VNA_DRIFT = 0.0
 
 
 @pytest.fixture(scope="module")
-def measured():
+def measured(tmp_path_factory):
     settings = SimulationSettings(
         compression=3000.0, spectrum_period_s=PERIOD_S, seed=3, vna_drift_per_hour=VNA_DRIFT
     )
     with SimulatedReceiver(settings) as sim:
-        site = sim.site()
+        devices = sim.site().devices
         clock = sim.clock
-        teensy = Teensy(site.device("teensy")["port"])
-        vna = Vna(site.device("vna")["resource"], clock=clock, timeout_s=10.0)
+        teensy = Teensy(devices.teensy.port)
+        vna = Vna(devices.vna.resource, clock=clock, timeout_s=10.0)
         spectra = Spectrometer(
-            ("127.0.0.1", site.device("spectrometer")["port"]), clock=clock, period_s=PERIOD_S
+            ("127.0.0.1", devices.spectrometer.port), clock=clock, period_s=PERIOD_S
         )
-        tc08 = Tc08(load_libusbtc08(site.device("tc08")["library"]), clock, period_s=1.0)
+        tc08 = Tc08(load_libusbtc08(devices.tc08.library), clock, period_s=1.0)
         with teensy, vna, spectra, tc08:
             frontend = FrontEnd(teensy)
             teensy.set_rail("tec", True)
@@ -76,6 +76,7 @@ def measured():
             losses = spectra.statistics
         yield {
             "sim": sim,
+            "store": stored(tmp_path_factory.mktemp("loop"), s11, cycles),
             "s11": s11,
             "cycles": cycles,
             "tec": tec_status,
@@ -84,23 +85,43 @@ def measured():
         }
 
 
+def stored(directory, s11, cycles):
+    """The measurements in a run store, as the run layer keeps them."""
+    store = RunStore(
+        directory / "run",
+        name="loop",
+        schedule_files=(),
+        site_yaml="",
+        metadata={},
+        channel_width_hz=SimulationSettings().physics.channel_width_hz,
+    )
+    store.open()
+    for name, m in s11.items():
+        store.add_s11(name, m.freq_hz, m.s11, timestamp=m.timestamp, settings={}, calibrated=True)
+    for name, cycle in cycles.items():
+        port = SOURCE_THERMOCOUPLE[name] if name in REACH_CALIBRATORS else None
+        temperature, std = source_temperature(cycle, port)
+        store.add_dicke(
+            name,
+            spectra={k: v.mean for k, v in cycle.spectra.items()},
+            timestamps={k: v.timestamps for k, v in cycle.spectra.items()},
+            integration_s=dict(cycle.integration_s),
+            n_spectra={k: v.n_spectra for k, v in cycle.spectra.items()},
+            temperature_k=temperature,
+            temperature_std_k=std,
+            switch_states={},
+            counters={},
+            timestamp=0.0,
+        )
+    return store
+
+
 def engine_data(measured):
-    sim = measured["sim"]
-    channels, freq = band_channels(sim.physics.config.channel_width_hz, 50e6, 130e6)
-    sources = {
-        name: source_data(measured["cycles"][name], measured["s11"][name], freq, channels)
-        for name in REACH_CALIBRATORS
-    }
-    data = CalibrationData(
-        freq_hz=freq,
-        gamma_rec=interpolate_s11(measured["s11"]["lna"], freq),
-        sources=sources,
-        channel_width_hz=sim.physics.config.channel_width_hz,
-    )
-    antenna = source_data(
-        measured["cycles"]["ant"], measured["s11"]["ant"], freq, channels, known_temperature=False
-    )
-    return data, antenna, channels, freq
+    """The engine's view through the store's hand-over (the run layer's one path)."""
+    view = measured["store"].engine_view((50e6, 130e6))
+    data = view.data
+    assert sorted(data.names) == sorted(REACH_CALIBRATORS)
+    return data, view.others["ant"], None, data.freq_hz
 
 
 def test_every_measurement_arrived_complete(measured):

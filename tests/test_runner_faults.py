@@ -2,12 +2,12 @@
 
 import pytest
 
-from reach_receiver.instruments import Instruments
-from reach_receiver.schedule.actions import Actions
-from reach_receiver.schedule.compile import compile_text
-from reach_receiver.schedule.runner import RunFailed, Runner
+from reach_receiver.config.site import replace_devices
+from reach_receiver.run import compile_text
+from reach_receiver.run.context import NoProgress
+from reach_receiver.run.session import RunFailed, RunSession
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
-from reach_receiver.store import RunStore, read_run_file
+from reach_receiver.store import read_run_file
 
 SCHEDULE = """
 schedule: fault
@@ -20,14 +20,14 @@ steps:
 """
 
 
-class FaultOnStep:
+class FaultOnStep(NoProgress):
     """A progress observer that breaks the spectrometer's stream when step ``n`` starts."""
 
     def __init__(self, sim: SimulatedReceiver, n: int) -> None:
         self.sim = sim
         self.n = n
 
-    def step(self, index, total, step, left_s):
+    def step(self, index, total, step, text, left_s):
         if index == self.n:
             self.sim.itpm.set_faults(stall=True)
 
@@ -39,21 +39,9 @@ def sim():
 
 
 def make_runner(sim, tmp_path, progress):
-    site = sim.site()
+    site = replace_devices(sim.site(), spectrometer={"timeout_s": 1.0})
     schedule = compile_text(SCHEDULE, "fault.yaml", site=site)
-    store = RunStore(
-        tmp_path / "run",
-        name="fault",
-        schedule_files=schedule.files,
-        site_yaml=site.to_yaml(),
-        metadata={},
-        channel_width_hz=400e6 / 32768,
-    )
-    store.open()
-    instruments = Instruments.from_site(site, sim.clock)
-    instruments.spectrometer.timeout_s = 1.0
-    actions = Actions(instruments, store, spectrum_period_s=60.0)
-    return Runner(schedule, actions, progress)
+    return RunSession(schedule, site, sim.clock, tmp_path, progress=progress)
 
 
 def test_stalled_spectrometer_mid_run_goes_safe_and_keeps_the_data(sim, tmp_path):
@@ -75,8 +63,8 @@ def test_stalled_spectrometer_mid_run_goes_safe_and_keeps_the_data(sim, tmp_path
 
 
 def test_interruption_is_recorded_as_such(sim, tmp_path):
-    class Interrupt:
-        def step(self, index, total, step, left_s):
+    class Interrupt(NoProgress):
+        def step(self, index, total, step, text, left_s):
             if index == 3:
                 raise KeyboardInterrupt
 

@@ -1,7 +1,7 @@
 """Real VNA data: S11s measured on a coarse grid, interpolated onto spectrometer channels.
 
 The daemon measures S11 on the VNA's grid and the engine needs it per channel
-(:func:`reach_receiver.acquire.interpolate_s11`, and the run file's engine layout). The
+(:func:`reach_receiver.store.handover.interpolate_s11`: the one hand-over to the engine). The
 EDGES-3 data set holds real VNA-corrected S11s on a 1.07 MHz grid and the EDGES
 pipeline's own smooth models of them on its 48.8 kHz spectrum grid. The test: our
 interpolation differs from those models by no more than the measurements themselves
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from calibration import edges_text as et
-from reach_receiver.acquire import interpolate_s11
 from reach_receiver.devices.vna import S11Measurement, SweepSettings
+from reach_receiver.store.handover import interpolate_s11
 from reach_receiver.store.touchstone import read_touchstone, write_touchstone
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "edges3-2022-316"
@@ -42,7 +42,7 @@ def test_interpolation_adds_no_error_beyond_the_measurement_noise(name):
         m.freq_hz[inside], freq_model, model.imag
     )
     scatter = np.sqrt(np.mean(np.abs(m.s11[inside] - at_points) ** 2))
-    ours = interpolate_s11(m, freq_model)
+    ours = interpolate_s11(m.freq_hz, m.s11, freq_model)
     difference = np.sqrt(np.mean(np.abs(ours - model) ** 2))
     assert difference <= 1.5 * scatter, (difference, scatter)
 

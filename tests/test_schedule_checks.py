@@ -5,7 +5,7 @@ import pytest
 
 from calibration import OrderChoice, solve_radiometric
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
-from reach_receiver.schedule.checks import compare_test_load, compare_with_benchmark, rfi_flags
+from reach_receiver.run.checks import compare_test_load, compare_with_benchmark, rfi_flags
 
 FREQ = np.linspace(40e6, 180e6, 1401)
 LOAD = 0.008 * np.exp(1j * FREQ / 30e6)  # a -42 dB test load

@@ -5,20 +5,16 @@ from pathlib import Path
 from textwrap import dedent
 
 import pytest
+from sites import planning_site
 
+from reach_receiver.config.yaml_lines import LineDict, LineList, load_yaml
 from reach_receiver.errors import ConfigError
-from reach_receiver.schedule import steps as s
-from reach_receiver.schedule.compile import (
-    Problem,
-    ScheduleError,
-    compile_schedule,
-    compile_text,
-)
-from reach_receiver.schedule.yaml_lines import LineDict, LineList, load_yaml
-from reach_receiver.site import SiteConfig
+from reach_receiver.run import compile_schedule, compile_text
+from reach_receiver.run import steps as s
+from reach_receiver.schedule.compile import Problem, ScheduleError
 
 START = datetime(2026, 11, 22, 12, 0, tzinfo=timezone.utc)
-SITE = SiteConfig(name="Karoo", longitude_deg=21.52, latitude_deg=-30.97)
+SITE = planning_site(name="Karoo", longitude_deg=21.52, latitude_deg=-30.97)
 
 
 def compiled(text: str, **kwargs) -> s.Schedule:

@@ -13,9 +13,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from reach_receiver.frontend.layout import REACH_SOURCES, VNA_STANDARDS
-from reach_receiver.schedule import steps as s
-from reach_receiver.schedule.compile import ScheduleError, compile_text
-from reach_receiver.schedule.step_parsers import PARSERS
+from reach_receiver.run import compile_text
+from reach_receiver.run import steps as s
+from reach_receiver.run.steps import STANDARD_KINDS
+from reach_receiver.schedule.compile import ScheduleError
 
 START = datetime(2026, 11, 22, 12, 0, tzinfo=timezone.utc)
 SOURCES = sorted(REACH_SOURCES)
@@ -29,7 +30,7 @@ PROFILE = settings(
 
 # --------------------------------------------------------------------------- (a) anything
 WORDS = [
-    *PARSERS,
+    *STANDARD_KINDS.names,
     "use",
     "schedule",
     "steps",

@@ -5,10 +5,12 @@ from datetime import datetime, timedelta, timezone
 from textwrap import dedent
 
 import pytest
+from sites import planning_site
 
 from reach_receiver.devices.vna_settings import SweepSettings
-from reach_receiver.schedule import steps as s
-from reach_receiver.schedule.compile import ScheduleError, compile_text
+from reach_receiver.run import compile_text
+from reach_receiver.run import steps as s
+from reach_receiver.schedule.compile import ScheduleError
 from reach_receiver.schedule.lst import (
     SIDEREAL_RATE,
     greenwich_sidereal_time_h,
@@ -27,11 +29,17 @@ START = datetime(2026, 11, 22, 12, 0, tzinfo=timezone.utc)
 DEFAULT_SWEEP_S = 1401 * 20 / 1e3 * 1.2 + 2  # SweepSettings' defaults (REACH's)
 
 
+#: The spectrometer's accumulation period of these tests' site (s).
+PERIOD_S = 30.0
+SITE = planning_site(PERIOD_S, longitude_deg=0.0)
+
+
 def compiled(text: str, start: datetime = START) -> s.Schedule:
-    return compile_text(dedent(text), "t.yaml", start_utc=start)
+    return compile_text(dedent(text), "t.yaml", start_utc=start, site=SITE)
 
 
 def durations(schedule: s.Schedule, **kwargs) -> list[tuple[float, float, int]]:
+    kwargs.setdefault("spectrum_period_s", PERIOD_S)
     entries = timeline(schedule, start_utc=START, longitude_deg=21.52, **kwargs)
     return [(e.start_s, e.duration_s, e.depth) for e in entries]
 
@@ -66,7 +74,9 @@ def test_timeline_of_a_small_schedule():
     assert [d for _, d, _ in got] == pytest.approx(expected, abs=1e-9)
     starts = [sum(expected[:i]) for i in range(len(expected))]
     assert [t for t, _, _ in got] == pytest.approx(starts, abs=1e-9)
-    total = estimated_duration_s(schedule, start_utc=START, longitude_deg=0.0)
+    total = estimated_duration_s(
+        schedule, start_utc=START, longitude_deg=0.0, spectrum_period_s=PERIOD_S
+    )
     assert total == pytest.approx(sum(expected), abs=1e-9)
     faster = estimated_duration_s(
         schedule, start_utc=START, longitude_deg=0.0, spectrum_period_s=1.0
@@ -162,7 +172,8 @@ def test_format_timeline_is_a_table_with_places_and_a_total():
               steps: [{dicke: {sources: [hot], seconds: 600}}]
         """
     )
-    text = format_timeline(timeline(schedule, start_utc=START, longitude_deg=0.0))
+    entries = timeline(schedule, start_utc=START, longitude_deg=0.0, spectrum_period_s=PERIOD_S)
+    text = format_timeline(entries)
     lines = text.splitlines()
     assert lines[0].split() == ["start", "duration", "step", "where"]
     assert "t.yaml:3" in lines[1]

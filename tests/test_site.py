@@ -1,21 +1,15 @@
 """Site files: strict parsing, and a source table that changes table A.2 where a site differs."""
 
 import pytest
+from sites import DEVICES
 
 from reach_receiver.clock import ManualClock
+from reach_receiver.config.site import load_site, parse_site
 from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.layout import REACH_SOURCES, SourcePosition
-from reach_receiver.instruments import Instruments
-from reach_receiver.schedule.compile import ScheduleError, compile_text
-from reach_receiver.site import load_site, parse_site
-
-DEVICES = {
-    "teensy": {"port": "/dev/ttyACM0"},
-    "vna": {"resource": "TCPIP0::10.0.0.2::5025::SOCKET"},
-    "tec": {"via": "teensy"},
-    "tc08": {},
-    "spectrometer": {"port": 4660},
-}
+from reach_receiver.run import compile_text
+from reach_receiver.run.instruments import Instruments
+from reach_receiver.schedule.compile import ScheduleError
 
 
 def test_round_trip_through_yaml(tmp_path):
@@ -45,7 +39,7 @@ def test_round_trip_through_yaml(tmp_path):
 @pytest.mark.parametrize(
     ("sources", "message"),
     [
-        ({"x": {"ms1": 9}}, "sources.x.ms1' must be an integer 1-8"),
+        ({"x": {"ms1": 9}}, "sources.x.ms1: must be an integer 1-8"),
         ({"x": {"ms1": 7, "ms3": 1, "ms4": 1}}, "both ms3 and ms4"),
         ({"x": {"ms3": 1}}, "must be {ms1"),
         ({"x": {"ms1": 4}}, "'cold' and 'x' sit at the same position"),
@@ -106,5 +100,5 @@ def test_thermocouple_ports_follow_table_2_2_unless_the_site_says_otherwise(tmp_
     path = tmp_path / "site.yaml"
     path.write_text(site.to_yaml())
     assert load_site(path).thermocouples == site.thermocouples
-    with pytest.raises(ConfigError, match=r"thermocouples\.hot' must be a TC-08 port 1-8"):
+    with pytest.raises(ConfigError, match=r"thermocouples\.hot: must be a TC-08 port 1-8"):
         parse_site({"devices": DEVICES, "thermocouples": {"hot": 9}})

@@ -14,12 +14,12 @@ The document (top level)::
 
 Included paths are relative to the including file; the including file's ``vars`` and
 ``blocks`` override the included ones; cycles and missing files are problems. Values
-may use ``${name}`` and ``${site.<key>}`` (:mod:`.variables`); steps are described in
-:mod:`.steps` and read by :mod:`.step_parsers`. After the steps are read, the whole list
-is checked for interlock violations (:mod:`.interlocks`) and impossible timing
-(:mod:`.timing`). Every problem of every file is collected; when there is any, a
-:class:`ScheduleError` lists them all, one ``file:line: key: message`` per line, and no
-schedule is returned.
+may use ``${name}`` and ``${site.<key>}`` (:mod:`.variables`); steps are read by
+:mod:`.parsing`, each by its kind (:mod:`.kinds`). After the steps are read, the whole
+list is checked for interlock violations (:mod:`.interlocks`) and impossible timing
+(:mod:`.timing`), with the site's front-end and spectrometer when a site is given.
+Every problem of every file is collected; when there is any, a :class:`ScheduleError`
+lists them all, one ``file:line: key: message`` per line, and no schedule is returned.
 """
 
 from __future__ import annotations
@@ -31,16 +31,16 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from reach_receiver.errors import ConfigError
-from reach_receiver.site import SiteConfig
+from reach_receiver.config.fields import UNRESOLVED, closest, type_name
+from reach_receiver.config.site import SiteConfig
+from reach_receiver.config.yaml_lines import LineDict, LineList, Problem, ProblemsError, load_yaml
 
 from . import steps as s
-from .fields import closest, type_name
 from .interlocks import interlock_problems
-from .step_parsers import Block, Context, compile_steps
+from .kinds import KindRegistry
+from .parsing import Block, ParseContext, compile_steps
 from .timing import timing_problems
-from .variables import UNRESOLVED, Defined, Variables, valid_name
-from .yaml_lines import LineDict, LineList, Problem, load_yaml
+from .variables import Defined, Variables, valid_name
 
 __all__ = ["Problem", "ScheduleError", "compile_schedule", "compile_text"]
 
@@ -49,15 +49,11 @@ TOP_KEYS = ("version", "schedule", "include", "vars", "blocks", "steps")
 INCLUDED_KEYS = ("include", "vars", "blocks")
 
 
-class ScheduleError(ConfigError):
+class ScheduleError(ProblemsError):
     """A schedule with mistakes; ``problems`` holds every one, in file and line order.
 
     ``str(error)`` gives one ``file:line: key: message`` per line.
     """
-
-    def __init__(self, problems: Sequence[Problem]) -> None:
-        self.problems = list(problems)
-        super().__init__("\n".join(str(problem) for problem in self.problems))
 
 
 @dataclass
@@ -200,6 +196,7 @@ def compile_text(
     text: str,
     file: str = "<string>",
     *,
+    kinds: KindRegistry,
     site: SiteConfig | None = None,
     start_utc: datetime | None = None,
 ) -> s.Schedule:
@@ -212,8 +209,12 @@ def compile_text(
     file
         Its name in problems and in the steps' :class:`~.steps.Where`; includes are
         relative to its directory (to the working directory for ``"<...>"`` names).
+    kinds
+        The step kinds the schedule may use.
     site
-        The site configuration, for ``${site.<key>}`` and LST waits (longitude 0 without).
+        The site configuration: its sources, ``${site.<key>}``, the longitude of LST
+        waits and the spectrometer's period. Without one: table A.2, longitude 0, and
+        timing checked as a lower bound (spectra taking only their seconds).
     start_utc
         When the schedule will start, for the timing checks; now by default.
 
@@ -234,9 +235,7 @@ def compile_text(
         raise ScheduleError(_order(problems, list(sources.texts)))
     variables = Variables(sources.variables, site, problems)
     name = _header(document, file, variables, problems)
-    context = Context(variables, problems, sources.blocks)
-    if site is not None:
-        context.sources = tuple(site.sources)
+    context = ParseContext(kinds, variables, problems, site, sources.blocks)
     steps: list[s.Step] = []
     if "steps" in document:
         steps = compile_steps(document["steps"], file, document.line_of("steps"), "steps", context)
@@ -244,11 +243,13 @@ def compile_text(
         context.using = [block_name]
         compile_steps(block.steps, block.file, block.line, f"blocks.{block_name}", context)
     values = variables.values()
-    problems += interlock_problems(steps, site.sources if site is not None else None)
+    problems += interlock_problems(steps, kinds, site.sources if site is not None else None)
     problems += timing_problems(
         steps,
+        kinds,
         start_utc=start_utc or datetime.now(timezone.utc),
         longitude_deg=site.longitude_deg if site is not None else 0.0,
+        spectrum_period_s=site.devices.spectrometer.period_s if site is not None else 0.0,
     )
     if problems:
         raise ScheduleError(_order(problems, list(sources.texts)))
@@ -257,12 +258,14 @@ def compile_text(
         steps=tuple(steps),
         files=tuple(sources.texts.items()),
         variables=tuple((k, _plain(v)) for k, v in values.items()),
+        kinds=kinds,
     )
 
 
 def compile_schedule(
     path: Path,
     *,
+    kinds: KindRegistry,
     site: SiteConfig | None = None,
     start_utc: datetime | None = None,
 ) -> s.Schedule:
@@ -279,4 +282,4 @@ def compile_schedule(
     except (OSError, UnicodeDecodeError) as err:
         message = f"cannot read the schedule: {getattr(err, 'strerror', None) or err}"
         raise ScheduleError([Problem(str(path), 1, "<file>", message)]) from err
-    return compile_text(text, str(path), site=site, start_utc=start_utc)
+    return compile_text(text, str(path), kinds=kinds, site=site, start_utc=start_utc)

@@ -3,21 +3,18 @@
 Before anything moves, the compiled steps are walked with a model of the board's state
 (rails on/off/unknown, switch positions) to find requests the firmware would refuse
 (``firmware/PROTOCOL.md``, "Interlocks"; thesis table A.3, fig. 2.42) or that make no
-sense:
+sense. The walk here is generic: each kind says what it does to the board
+(:meth:`~.kinds.StepKind.check_interlocks`, by default: make its connections), and this
+module supplies the board model and the rules every kind shares:
 
-* any command to the hardware (power, connect, a measurement, the TEC, thermocouple
-  logging) before ``initialise`` has connected the devices;
-* ``3v3`` and ``5v`` are never switched (checked where the rails are read);
-* ``24v`` off while the fan, which it feeds, is on; the fan on while ``24v`` is off;
+* any command to the hardware (a kind with ``needs_devices``) before ``initialise`` has
+  connected the devices;
 * ``12v`` or ``24v`` off while a switch it drives (layout ``SWITCH_RAIL``) is engaged,
-  i.e. after a connect or a measurement that moved it and before ``safe``;
-* a ``tec`` step while rail ``tec`` is off.
+  i.e. after a connection moved it and before ``safe`` (:meth:`BoardCheck.engaged_by`).
 
 What each connection switches is planned by :meth:`FrontEnd.path`, the same planner the
-runner uses. ``initialise`` goes to the safe state (noise source, every switch, ``6v``
-and ``12v`` off; ``24v``, fan and TEC keep a state that is unknown here) and then
-switches its ``rails`` on. Only definite violations are reported: after a step that
-could not be read, the state is unknown until the next ``initialise``.
+runner uses. Only definite violations are reported: after a step that could not be
+read, the state is unknown until the next ``initialise``.
 """
 
 from __future__ import annotations
@@ -25,11 +22,11 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
+from reach_receiver.config.yaml_lines import Problem
 from reach_receiver.devices.board import FrontEndState
 from reach_receiver.errors import ConfigError, InterlockError
 from reach_receiver.frontend.layout import (
     NOISE_SOURCE,
-    REFERENCE_LOAD,
     SWITCH_POSITIONS,
     SWITCH_RAIL,
     SWITCHABLE_RAILS,
@@ -38,25 +35,10 @@ from reach_receiver.frontend.layout import (
 from reach_receiver.frontend.paths import FrontEnd, SignalPath
 
 from . import steps as s
-from .step_parsers import Unparsed
-from .yaml_lines import Problem
+from .kinds import KindRegistry
 
-#: Steps that command the hardware and so need ``initialise`` first.
-NEEDS_DEVICES = (
-    s.Power,
-    s.Connect,
-    s.VnaCalibrate,
-    s.TestLoadCheck,
-    s.MeasureS11,
-    s.MeasureSpectrum,
-    s.Dicke,
-    s.Temperatures,
-    s.Tec,
-    s.Observe,
-)
-_SWITCHES = (*SWITCH_POSITIONS, "mts")
+SWITCHES = (*SWITCH_POSITIONS, "mts")
 _SAFE_OFF = (NOISE_SOURCE, "6v", "12v")  # PROTOCOL.md, "safe state"
-_SOL = ("short", "open", "load")
 
 
 class _NoBoard:
@@ -79,47 +61,71 @@ class _NoBoard:
         raise InterlockError("planning only")
 
 
-PLANNER = FrontEnd(_NoBoard())
-
-
-def connections(step: s.Step) -> list[tuple[str, str]]:
-    """The (source, destination) connections a step makes, in order."""
-    if isinstance(step, s.Connect):
-        return [(step.source, step.to)]
-    if isinstance(step, s.VnaCalibrate):
-        return [(standard, "vna") for standard in _SOL]
-    if isinstance(step, s.TestLoadCheck):  # a failed check recalibrates
-        return [("test_load", "vna"), *((standard, "vna") for standard in _SOL)]
-    if isinstance(step, s.MeasureS11):
-        return [(target, "vna") for target in step.targets]
-    if isinstance(step, s.MeasureSpectrum):
-        return [(step.source, "lna")]
-    if isinstance(step, s.Dicke | s.Observe):
-        sources = step.sources if isinstance(step, s.Dicke) else (step.source,)
-        dicke = [(x, "lna") for src in sources for x in (src, REFERENCE_LOAD, NOISE_SOURCE)]
-        return dicke + ([("test_load", "vna")] if isinstance(step, s.Observe) else [])
-    return []
-
-
 @dataclass
-class _Board:
-    """What is known of the board: ``None`` means unknown."""
+class BoardCheck:
+    """What is known of the board while a step list is walked: ``None`` means unknown.
 
+    Kinds act on it from :meth:`~.kinds.StepKind.check_interlocks`.
+    """
+
+    kinds: KindRegistry
+    planner: FrontEnd
     initialised: bool | None = False
     rails: dict[str, bool | None] = field(default_factory=lambda: dict.fromkeys(SWITCHABLE_RAILS))
-    switches: dict[str, int | str | None] = field(default_factory=lambda: dict.fromkeys(_SWITCHES))
+    switches: dict[str, int | str | None] = field(default_factory=lambda: dict.fromkeys(SWITCHES))
+    problems: list[Problem] = field(default_factory=list)
+    current: s.Step | None = None
+
+    def report(self, key: str, message: str) -> None:
+        """Record a violation at the line of the step being checked."""
+        if self.current is None:
+            raise RuntimeError("report outside a step")
+        where = self.current.where
+        problem = Problem(where.file, where.line, key, message)
+        if problem not in self.problems:
+            self.problems.append(problem)
+
+    def walk(self, steps: Iterable[s.Step]) -> None:
+        """Check steps in order (a kind with nested steps walks them from here)."""
+        for step in steps:
+            self.check(step)
+
+    def check(self, step: s.Step) -> None:
+        """Check one step against what is known, then apply its effect."""
+        outer, self.current = self.current, step
+        try:
+            if not self.kinds.knows(step):  # could not be read: assume nothing after it
+                self.forget()
+                return
+            kind = self.kinds.of(step)
+            if kind.needs_devices and self.initialised is False:
+                self.report(kind.name, "comes before 'initialise' has connected the devices")
+            kind.check_interlocks(step, self)
+        finally:
+            self.current = outer
 
     def forget(self) -> None:
+        """Nothing is known any more (after a step that could not be read)."""
         self.initialised = None
         self.rails = dict.fromkeys(SWITCHABLE_RAILS)
-        self.switches = dict.fromkeys(_SWITCHES)
+        self.switches = dict.fromkeys(SWITCHES)
 
     def release(self) -> None:
-        self.switches = {name: ("lna" if name == "mts" else 0) for name in _SWITCHES}
+        """The safe state: every switch released, noise source, ``6v`` and ``12v`` off."""
+        self.switches = {name: ("lna" if name == "mts" else 0) for name in SWITCHES}
         for rail in _SAFE_OFF:
             self.rails[rail] = False
 
-    def apply(self, path: SignalPath) -> None:
+    def connect(self, source: str, to: str) -> None:
+        """Apply the switch settings and rails of one planned connection."""
+        try:
+            path = self.planner.path(source, "vna" if to == "vna" else "lna")
+        except ConfigError:  # an unknown source, already reported
+            self.switches = dict.fromkeys(SWITCHES)
+            return
+        self._apply(path)
+
+    def _apply(self, path: SignalPath) -> None:
         for rail in path.rails_off:
             self.rails[rail] = False
         for rail in path.rails_on:
@@ -136,86 +142,16 @@ class _Board:
         ]
 
 
-class _Checker:
-    def __init__(self, planner: FrontEnd) -> None:
-        self.planner = planner
-        self.board = _Board()
-        self.problems: list[Problem] = []
-
-    def report(self, step: s.Step, key: str, message: str) -> None:
-        problem = Problem(step.where.file, step.where.line, key, message)
-        if problem not in self.problems:
-            self.problems.append(problem)
-
-    def walk(self, steps: Iterable[s.Step]) -> None:
-        for step in steps:
-            self.check(step)
-
-    def check(self, step: s.Step) -> None:
-        board = self.board
-        if isinstance(step, NEEDS_DEVICES) and board.initialised is False:
-            self.report(step, _kind(step), "comes before 'initialise' has connected the devices")
-        if isinstance(step, s.Initialise):
-            board.initialised = True
-            board.release()
-            for rail in step.rails:
-                board.rails[rail] = True
-        elif isinstance(step, s.Safe):
-            board.release()
-        elif isinstance(step, s.Power):
-            for rail, on in step.states:
-                self._power(step, rail, on)
-        elif isinstance(step, s.Tec):
-            if board.rails.get("tec") is False:
-                self.report(step, "tec", "rail tec is off: power it first ({tec: on})")
-        elif isinstance(step, s.Repeat):
-            self.walk(step.steps)
-            if step.count > 1:  # the second pass starts from the state the first left
-                self.walk(step.steps)
-        elif isinstance(step, Unparsed):
-            board.forget()
-        for source, to in connections(step):
-            try:
-                board.apply(self.planner.path(source, "vna" if to == "vna" else "lna"))
-            except ConfigError:  # an unknown source, already reported
-                board.switches = dict.fromkeys(_SWITCHES)
-
-    def _power(self, step: s.Power, rail: str, on: bool) -> None:
-        board = self.board
-        key = f"power.{rail}"
-        if on and rail == "fan" and board.rails.get("24v") is False:
-            self.report(step, key, "the fan runs from 24v, which is off: switch 24v on first")
-        if not on and rail == "24v" and board.rails.get("fan") is True:
-            self.report(step, key, "24v feeds the fan, which is on: switch the fan off first")
-        if not on and rail in ("12v", "24v"):
-            engaged = board.engaged_by(rail)
-            if engaged:
-                self.report(
-                    step,
-                    key,
-                    f"{rail} drives {', '.join(engaged)}, engaged since a connection: "
-                    "put the front-end in its safe state ('safe') first",
-                )
-        board.rails[rail] = on
-
-
-def _kind(step: s.Step) -> str:
-    names = {
-        s.MeasureS11: "s11",
-        s.MeasureSpectrum: "spectrum",
-        s.VnaCalibrate: "vna_calibrate",
-        s.TestLoadCheck: "test_load_check",
-    }
-    return names.get(type(step), type(step).__name__.lower())
-
-
 def interlock_problems(
-    steps: Sequence[s.Step], sources: Mapping[str, SourcePosition] | None = None
+    steps: Sequence[s.Step],
+    kinds: KindRegistry,
+    sources: Mapping[str, SourcePosition] | None = None,
 ) -> list[Problem]:
     """Every interlock violation found by walking ``steps`` from an unknown board state.
 
     ``sources`` is the site's source table (table A.2 by default).
     """
-    checker = _Checker(FrontEnd(_NoBoard(), sources) if sources is not None else PLANNER)
-    checker.walk(steps)
-    return checker.problems
+    planner = FrontEnd(_NoBoard(), sources) if sources is not None else FrontEnd(_NoBoard())
+    board = BoardCheck(kinds, planner)
+    board.walk(steps)
+    return board.problems

@@ -17,12 +17,21 @@ millisecond over this century (Meeus' examples 12.a and 12.b are met to 0.1 ms i
 tests). UTC is used in place of UT1, which differs by less than 0.9 s, and the mean
 rather than apparent sidereal time is returned (the equation of the equinoxes, at most
 about 1.2 s), so the LST is good to about 2 s of time: ample for starting observations.
+
+Records carry astropy's apparent sidereal time instead (:func:`apparent_lst_h`); a test
+holds the two within that 2 s.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
+from collections.abc import Sequence
 from datetime import datetime, timedelta, timezone
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 #: J2000.0 (2000-01-01 12:00 TT, taken as UTC here) as a POSIX time stamp.
 _J2000_POSIX_S = 946_728_000.0
@@ -103,3 +112,32 @@ def next_utc_at_lst(after: datetime, lst_h: float, longitude_deg: float) -> date
     error_h = (lst_h - local_sidereal_time_h(result, longitude_deg) + 12.0) % 24.0 - 12.0
     result += timedelta(hours=error_h / SIDEREAL_RATE)
     return max(result, start)
+
+
+def apparent_lst_h(
+    timestamps: Sequence[float] | NDArray[Any], longitude_deg: float
+) -> NDArray[np.float64]:
+    """Apparent local sidereal time (hours) of Unix time stamps, through astropy, offline.
+
+    For the time stamps of records, where the closed form above (good to about 2 s) is
+    replaced by astropy's IAU 2006/2000A apparent sidereal time with UT1 from the IERS-B
+    table that astropy ships. Nothing is downloaded: a site 90 km from town has no use
+    for a call home that fails. Beyond the bundled table UT1 is taken as UTC and polar
+    motion as its last value (astropy's "degraded accuracy", under a second of time);
+    those warnings, and ERFA's "dubious year" for times past its leap-second table, are
+    expected and silenced here.
+    """
+    from astropy import units
+    from astropy.time import Time
+    from astropy.utils import iers
+
+    stamps = np.atleast_1d(np.asarray(timestamps, dtype=float))
+    if stamps.size == 0:
+        return np.zeros(0)
+    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp(
+        "auto_max_age", None
+    ), iers.conf.set_temp("iers_degraded_accuracy", "ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # ERFA "dubious year", IERS polar-motion fallback
+        times = Time(stamps, format="unix", scale="utc")
+        lst = times.sidereal_time("apparent", longitude=longitude_deg * units.deg)
+    return np.asarray(lst.hour, dtype=float)

@@ -4,7 +4,7 @@ A scalar that is exactly ``"${name}"`` is replaced by the variable's value, what
 its YAML type (a number, a list of sources, a mapping); ``${name}`` inside a longer
 string is interpolated as text. ``${site.<key>}`` reads a field of the site
 configuration (``${site.longitude_deg}``). Variables may use other variables; a cycle
-or an unknown name is a :class:`~.yaml_lines.Problem` at the line where it is used.
+or an unknown name is a problem at the line where it is used.
 
 A container substituted for ``${name}`` is copied with every line set to the line of
 the use, so that a mistake inside it is reported where the schedule used it.
@@ -12,30 +12,21 @@ the use, so that a mistake inside it is reported where the schedule used it.
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import re
 from dataclasses import dataclass
 from typing import Any
 
-from reach_receiver.site import SiteConfig
-
-from .yaml_lines import LineDict, LineList, Problem
+from reach_receiver.config.fields import UNRESOLVED
+from reach_receiver.config.site import SiteConfig
+from reach_receiver.config.yaml_lines import LineDict, LineList, Problem
 
 _REFERENCE = re.compile(r"\$\{([^}]*)\}")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-#: Site fields a schedule may read (``devices`` is for the drivers, not for schedules).
-SITE_KEYS = tuple(f.name for f in dataclasses.fields(SiteConfig) if f.name != "devices")
+#: Site fields a schedule may read (the devices are for the drivers, not for schedules).
+SITE_KEYS = ("name", "longitude_deg", "latitude_deg")
 
-
-class _Unresolved:
-    """Marks a value whose substitution failed (its problem is already reported)."""
-
-    def __repr__(self) -> str:
-        return "UNRESOLVED"
-
-
-UNRESOLVED: Any = _Unresolved()
+__all__ = ["SITE_KEYS", "UNRESOLVED", "Defined", "Variables", "relined", "valid_name"]
 
 
 @dataclass(frozen=True)

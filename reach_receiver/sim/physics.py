@@ -30,9 +30,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration.basis import PolynomialBasis
-from calibration.noise_waves import dicke_powers
+from calibration.data import CalibrationData, SourceData
+from calibration.noise_waves import design_terms, dicke_powers, source_temperature
 from calibration.reflections import lna_reflection, reach_source_reflection, resistor
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, ReceiverTruth, enr_noise_temperature
+from calibration.solution import Solution
 from reach_receiver.clock import Clock
 from reach_receiver.frontend.layout import (
     MS2_TO_LNA,
@@ -281,6 +283,20 @@ class ReceiverPhysics:
         effective[4] = t_l
         effective[3] = (p_ns / gain - offset) / rec_match - t_l
         return effective
+
+    def calibration_error_k(
+        self, solution: Solution, data: CalibrationData, source: SourceData
+    ) -> float:
+        """RMS over the band of ``T_cal(Q) - T_true(Q)`` for ``source`` (kelvin).
+
+        Both temperatures use the same measured Q (eq. 3.21), so the difference is the
+        error the calibration adds, which its posterior predicts.
+        """
+        freq = data.freq_hz
+        spectrum = solution.calibrate(freq, data.gamma_rec, source, data.channel_width_hz)
+        terms = design_terms(source.gamma, data.gamma_rec)
+        true_t = source_temperature(self.effective_theta(freq), terms, source.q)
+        return float(np.sqrt(np.mean((spectrum.mean - true_t) ** 2)))
 
     def enr_k(self, freq_hz: FloatArray) -> FloatArray:
         """The noise diode's excess temperature: a cubic through table 2.1's ENR (eq. 2.1).

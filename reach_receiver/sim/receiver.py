@@ -26,10 +26,20 @@ import tempfile
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from reach_receiver.clock import Clock, CompressedClock
+from reach_receiver.config.settings import (
+    DeviceSettings,
+    SpectrometerSettings,
+    Tc08Settings,
+    TecSettings,
+    TeensySettings,
+    VnaSettings,
+)
+from reach_receiver.config.site import SiteConfig
 from reach_receiver.errors import ReceiverError
 from reach_receiver.sim.itpm import ItpmSimulator
 from reach_receiver.sim.physics import PhysicsConfig, ReceiverPhysics
@@ -37,13 +47,14 @@ from reach_receiver.sim.tc08_standin import Tc08StandIn
 from reach_receiver.sim.tec import TecSimulator
 from reach_receiver.sim.teensy_firmware import FirmwareTeensy
 from reach_receiver.sim.vna import VnaSimulator
-from reach_receiver.site import SiteConfig
 from reach_receiver.store.touchstone import write_touchstone
 
 log = logging.getLogger(__name__)
 
 #: Simulated seconds per real second of a dry run: an hour of integration in 1.2 s.
 DEFAULT_COMPRESSION = 3000.0
+#: Spectra a real second the simulated iTPM sends at most (see spectrum_period_for).
+MAX_SPECTRA_PER_REAL_S = 100.0
 
 #: The TC-08 stand-in's values file is rewritten at most this often per real second (every
 #: simulated second in real time; every 60 s at 3000x, when the heated load, the fastest
@@ -68,6 +79,43 @@ class SimulationSettings:
     tec_tau_s: float = 600.0
     vna_drift_per_hour: float = 0.001
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+
+
+def spectrum_period_for(compression: float) -> float:
+    """The simulated iTPM's accumulation period for a time compression (s).
+
+    At most :data:`MAX_SPECTRA_PER_REAL_S` spectra a real second (each 256 UDP packets)
+    and never shorter than REACH's own 1 s: 30 s at the default 3000x.
+    """
+    return max(1.0, compression / MAX_SPECTRA_PER_REAL_S)
+
+
+def simulated_site(
+    settings: SimulationSettings,
+    devices: DeviceSettings | None = None,
+    **fields: Any,
+) -> SiteConfig:
+    """The site file of the simulated receiver (REACH's place in the Karoo).
+
+    Without ``devices``, the instruments' addresses are placeholders: the site for
+    checking and timing a schedule before the simulators start.
+    """
+    if devices is None:
+        devices = DeviceSettings(
+            teensy=TeensySettings(port="<simulated>"),
+            vna=VnaSettings(resource="<simulated>"),
+            tec=TecSettings(via="teensy"),
+            tc08=Tc08Settings(),
+            spectrometer=SpectrometerSettings(period_s=settings.spectrum_period_s),
+        )
+    return SiteConfig(
+        devices=devices,
+        name="simulated receiver",
+        longitude_deg=21.52,
+        latitude_deg=-30.97,
+        source="reach-sim",
+        **fields,
+    )
 
 
 def free_udp_port(host: str = "127.0.0.1") -> int:
@@ -198,26 +246,19 @@ class SimulatedReceiver:
         if self.teensy is None or self.tc08 is None:
             raise RuntimeError("the simulated receiver is not started")
         host, port = self.spectrometer_address
-        return SiteConfig(
-            name="simulated receiver",
-            longitude_deg=21.52,
-            latitude_deg=-30.97,
-            devices={
-                "teensy": {"port": self.teensy.port},
-                "tec": {"via": "teensy"},
-                "vna": {"resource": self.vna.address},
-                "tc08": {"library": str(self.tc08.library)},
-                "spectrometer": {
-                    "host": host,
-                    "port": port,
-                    "period_s": self.settings.spectrum_period_s,
-                },
-            },
-            references={"test_load": str(self.test_load_reference)},
-            simulation=(
-                self.clock.parameters if isinstance(self.clock, CompressedClock) else {}
+        return simulated_site(
+            self.settings,
+            devices=DeviceSettings(
+                teensy=TeensySettings(port=self.teensy.port),
+                vna=VnaSettings(resource=self.vna.address),
+                tec=TecSettings(via="teensy"),
+                tc08=Tc08Settings(library=str(self.tc08.library)),
+                spectrometer=SpectrometerSettings(
+                    period_s=self.settings.spectrum_period_s, host=host, port=port
+                ),
             ),
-            source="reach-sim",
+            references={"test_load": str(self.test_load_reference)},
+            simulation=self.clock.parameters if isinstance(self.clock, CompressedClock) else {},
         )
 
     def close(self) -> None:

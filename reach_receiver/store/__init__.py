@@ -5,18 +5,22 @@ before ``add_*`` returns) by :class:`RunStore`, and merged into ``run.h5`` at th
 (:func:`merge_run`, also the recovery of a killed run). The merged file carries the
 measurements as taken and the REACH layout that :func:`calibration.hdf5_io.read_run`
 reads (:mod:`.merge`). :func:`read_run_file` reads a run back, merged or not;
-:mod:`.touchstone` reads and writes one-port Touchstone files.
+:mod:`.touchstone` reads and writes one-port Touchstone files. :mod:`.handover` is the
+one place where a run's measurements become the calibration engine's input.
 """
 
+from .handover import HandOver
 from .merge import RUN_FILE, merge_run
 from .parts import StoreError
 from .reader import Measurement, RunContents, read_run_file
-from .run_store import DICKE_POSITIONS, RunStore, software_versions
+from .run_store import DICKE_POSITIONS, EngineView, RunStore, software_versions
 from .touchstone import TouchstoneError, read_touchstone, write_touchstone
 
 __all__ = [
     "DICKE_POSITIONS",
     "RUN_FILE",
+    "EngineView",
+    "HandOver",
     "Measurement",
     "RunContents",
     "RunStore",

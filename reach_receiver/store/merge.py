@@ -6,24 +6,27 @@ The merged file (root attributes ``format = "reach-receiver-run"``, ``format_ver
 
     /run/                         schedule_<i> (text, attr path), site (YAML), metadata (JSON)
     /measurements/NNNNNN_<kind>_<name>/   every measurement as written (run_store docstring)
-    /observation_data/            the REACH / engine layout (calibration.hdf5_io), built from
-        frequencies               channel centres k * channel_width_hz inside band_hz
+    /observation_data/            the REACH / engine layout (calibration.hdf5_io), chosen
+        frequencies               and written by the hand-over (:mod:`.handover`):
         {src}_spectra, {src}_load_spectra, {src}_ns_spectra
                                   input 0, band channels; (n,) for one Dicke cycle,
                                   (n_cycles, n) for several; integration_s_* per row
         {src}_timestamps          mean time of each position, (3,) or (n_cycles, 3)
         {src}_s11, lna_s11        latest calibrated S11, cubic splines on Re and Im
-    /observation_metadata/        attrs channel_width_hz, sources, calibrators
-        temperatures/{src}        mean over the cycles, K (sources with a temperature)
+    /observation_metadata/        attrs channel_width_hz, band_hz, sources, calibrators,
+                                  handover (JSON: what was used, by measurement number)
+        temperatures/{src}        mean over the cycles, K (calibrators)
         temperature_log/          timestamps, values (degC), attr channels
     /calibration/solution         hard link to the latest solution
     /calibration/calibrated/{name}   hard link to the latest calibrated spectrum of name
     /checks/NNN_<name>            hard links to the checks, in order
     /events/                      timestamps, kinds, messages
 
-A source whose S11 is missing or does not cover the band (no extrapolation) is left out
-of the engine layout and named in the ``warnings`` attribute of ``/observation_data``;
-calibrators are the sources with a temperature except the antenna ``ant``.
+The engine layout holds what the run's latest calibration used (its recorded hand-over),
+so that ``reach-cal solve run.h5`` reproduces that solution; a run without a calibration
+gets the hand-over's rule applied to all its measurements. Every measurement, used or
+not, stays in ``/measurements``; what was left out is named in the ``warnings``
+attribute of ``/observation_data``.
 
 Merging is atomic (:func:`~reach_receiver.store.parts.atomic_h5`) and idempotent: the
 parts are deleted only after ``run.h5`` replaced its predecessor, and a new merge takes
@@ -43,18 +46,14 @@ from typing import Any
 
 import h5py
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from calibration.errors import FileFormatError
 from calibration.hdf5_io import RECEIVER_RUN_FORMAT
 
+from .handover import HandOver, select, write_layout
 from .parts import (
     FORMAT_VERSION,
     PARTS_DIR,
-    UNITS_HZ,
-    UNITS_K,
-    UNITS_POWER,
-    UNITS_REFLECTION,
     UNITS_S,
     UNITS_TEXT,
     StoreError,
@@ -70,9 +69,6 @@ from .parts import (
 log = logging.getLogger(__name__)
 
 RUN_FILE = "run.h5"
-ANTENNA = "ant"
-RECEIVER = "lna"
-_POSITIONS = (("source", "spectra"), ("load", "load_spectra"), ("ns", "ns_spectra"))
 _PART_ATTRS = ("format", "format_version")
 
 
@@ -90,13 +86,6 @@ class Record:
 def group_name(sequence: int, kind: str, name: str) -> str:
     """Name of a measurement's group under ``/measurements``."""
     return f"{sequence:06d}_{kind}_{safe_name(name)}"
-
-
-def band_channels(width_hz: float, band_hz: tuple[float, float]) -> slice:
-    """Channels ``k`` whose centres ``k * width_hz`` lie in ``band_hz`` (1e-9 slack)."""
-    first = int(np.ceil(band_hz[0] / width_hz - 1e-9))
-    last = int(np.floor(band_hz[1] / width_hz + 1e-9))
-    return slice(first, last + 1)
 
 
 def records_in_file(path: Path) -> list[Record]:
@@ -234,15 +223,6 @@ def merge_run(directory: Path, status: str | None = None, reason: str = "") -> P
     return target
 
 
-def _interpolate(g: Any, freq: np.ndarray) -> np.ndarray | None:
-    f_s11, s11 = np.asarray(g["frequencies"][()]), np.asarray(g["s11"][()])
-    if f_s11.size < 4 or freq[0] < f_s11[0] or freq[-1] > f_s11[-1]:
-        return None
-    re = CubicSpline(f_s11, s11.real)(freq)
-    im = CubicSpline(f_s11, s11.imag)(freq)
-    return np.asarray(re + 1j * im, dtype=complex)
-
-
 def _str_array(values: list[str]) -> np.ndarray:
     return np.array(values, dtype=h5py.string_dtype())
 
@@ -253,7 +233,20 @@ def _derived(f: Any) -> None:
     by_kind: dict[str, list[Any]] = {}
     for g in groups:
         by_kind.setdefault(as_str(g.attrs["kind"]), []).append(g)
-    _engine_layout(f, by_kind)
+    numbered = {int(g.attrs["sequence"]): g for g in groups}
+    solutions = [g for g in by_kind.get("solution", []) if "handover" in g.attrs]
+    if solutions:
+        handover = HandOver.from_json(as_str(solutions[-1].attrs["handover"]))
+    else:
+        run = f["run"]
+        band = tuple(float(v) for v in run.attrs["band_hz"])
+        handover = select(numbered, (band[0], band[1]), float(run.attrs["channel_width_hz"]))
+    write_layout(f, numbered, handover)
+    warnings = list(handover.warnings)
+    _temperature_log(f["observation_metadata"], by_kind.get("temperatures", []), warnings)
+    f["observation_data"].attrs["warnings"] = _str_array(warnings)
+    for text in warnings:
+        log.warning("run layout: %s", text)
     cal = f.create_group("calibration")
     if by_kind.get("solution"):
         cal["solution"] = by_kind["solution"][-1]["solution"]
@@ -271,96 +264,6 @@ def _derived(f: Any) -> None:
     dataset(events, "timestamps", [float(g.attrs["timestamp"]) for g in found], UNITS_S)
     dataset(events, "kinds", _str_array([as_str(g.attrs["event"]) for g in found]), UNITS_TEXT)
     dataset(events, "messages", _str_array([as_str(g.attrs["message"]) for g in found]), UNITS_TEXT)
-
-
-def _engine_layout(f: Any, by_kind: dict[str, list[Any]]) -> None:
-    run = f["run"]
-    width = float(run.attrs["channel_width_hz"])
-    lo, hi = (float(v) for v in run.attrs["band_hz"])
-    channels = band_channels(width, (lo, hi))
-    freq = width * np.arange(channels.start, channels.stop, dtype=float)
-    warnings: list[str] = []
-    s11s = {as_str(g.attrs["name"]): g for g in by_kind.get("s11", []) if g.attrs["calibrated"]}
-    cycles: dict[str, list[Any]] = {}
-    for g in by_kind.get("dicke", []):
-        cycles.setdefault(as_str(g.attrs["name"]), []).append(g)
-    obs = f.create_group("observation_data")
-    dataset(obs, "frequencies", freq, UNITS_HZ)
-    meta = f.create_group("observation_metadata")
-    temps = meta.create_group("temperatures")
-
-    def gamma_of(name: str) -> np.ndarray | None:
-        if name not in s11s:
-            warnings.append(f"{name}: no calibrated S11; left out of the engine layout")
-            return None
-        gamma = _interpolate(s11s[name], freq)
-        if gamma is None:
-            warnings.append(f"{name}: S11 does not cover {lo:.0f}-{hi:.0f} Hz; left out")
-        return gamma
-
-    lna = gamma_of(RECEIVER)
-    if lna is not None:
-        dataset(obs, "lna_s11", lna, UNITS_REFLECTION, measurement=s11s[RECEIVER].name)
-    sources, calibrators = [], []
-    for src, rows in cycles.items():
-        gamma = gamma_of(src)
-        n_ch = rows[0]["source/spectrum"].shape[1]
-        if any(g["source/spectrum"].shape[1] != n_ch for g in rows) or n_ch < channels.stop:
-            warnings.append(f"{src}: spectra do not cover the band channels; left out")
-            continue
-        if gamma is None:
-            continue
-        for position, suffix in _POSITIONS:
-            data = np.stack([g[f"{position}/spectrum"][0, channels] for g in rows])
-            dataset(obs, f"{src}_{suffix}", data[0] if len(rows) == 1 else data, UNITS_POWER)
-        spectra = obs[f"{src}_spectra"]
-        for position, _ in _POSITIONS:
-            per_row = [float(g[position].attrs["integration_s"]) for g in rows]
-            spectra.attrs[f"integration_s_{position}"] = float(np.mean(per_row))
-        spectra.attrs["measurements"] = _str_array([g.name for g in rows])
-        times = np.array(
-            [
-                [
-                    np.mean(g[f"{p}/timestamps"][()])
-                    if g[f"{p}/timestamps"].size
-                    else float(g.attrs["timestamp"])
-                    for p, _ in _POSITIONS
-                ]
-                for g in rows
-            ]
-        )
-        dataset(
-            obs,
-            f"{src}_timestamps",
-            times[0] if len(rows) == 1 else times,
-            UNITS_S,
-            columns=_str_array([p for p, _ in _POSITIONS]),
-        )
-        dataset(obs, f"{src}_s11", gamma, UNITS_REFLECTION, measurement=s11s[src].name)
-        known = [g for g in rows if "temperature" in g]
-        if known:
-            per_cycle = [float(g["temperature"][()]) for g in known]
-            # Each cycle's error is its own; the mean's is the root-sum-square over n.
-            stds = [float(g["temperature"].attrs.get("std_k", 0.0)) for g in known]
-            dataset(
-                temps,
-                src,
-                float(np.mean(per_cycle)),
-                UNITS_K,
-                per_cycle_k=per_cycle,
-                timestamps=[float(g.attrs["timestamp"]) for g in known],
-                std_k=float(np.sqrt(np.sum(np.square(stds))) / len(stds)),
-            )
-            if src != ANTENNA:
-                calibrators.append(src)
-        sources.append(src)
-    meta.attrs.update(
-        channel_width_hz=width, sources=_str_array(sources), calibrators=_str_array(calibrators)
-    )
-    _temperature_log(meta, by_kind.get("temperatures", []), warnings)
-    obs.attrs["warnings"] = _str_array(warnings)
-    for text in warnings:
-        log.warning("run layout: %s", text)
 
 
 def _temperature_log(meta: Any, logs: list[Any], warnings: list[str]) -> None:

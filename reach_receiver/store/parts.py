@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import re
 import tempfile
@@ -31,7 +32,12 @@ import numpy as np
 
 from reach_receiver.errors import ReceiverError
 
+log = logging.getLogger(__name__)
+
 PART_FORMAT = "reach-receiver-part"
+#: Run files: the writer reads and writes, the observing group reads (the directory's).
+FILE_MODE = 0o640
+DIRECTORY_MODE = 0o750
 FORMAT_VERSION = "1.0"
 PARTS_DIR = "parts"
 
@@ -40,6 +46,7 @@ UNITS_HZ = "Hz"
 UNITS_K = "K"
 UNITS_C = "degC"
 UNITS_S = "s"
+UNITS_HOURS = "h"
 UNITS_POWER = "power (arbitrary)"
 UNITS_REFLECTION = "complex reflection"
 UNITS_NONE = "1"
@@ -99,6 +106,33 @@ def dataset(group: Any, name: str, value: Any, units: str, **attrs: Any) -> Any:
     return ds
 
 
+def share_with_group(fd: int, directory: Path) -> None:
+    """Make an open file ``0640`` and give it ``directory``'s group, where allowed.
+
+    Run files are for the whole observing group to read; only the writer may change
+    them. A process that is not in the directory's group keeps its own group (the run
+    directory's creation says so once, :func:`make_shared_directory`).
+    """
+    os.fchmod(fd, FILE_MODE)
+    group = os.stat(directory).st_gid
+    if group == os.fstat(fd).st_gid:
+        return
+    with contextlib.suppress(PermissionError):
+        os.fchown(fd, -1, group)
+
+
+def make_shared_directory(directory: Path) -> None:
+    """Create ``directory`` (and parents) ``0750``, in its parent's group where allowed."""
+    directory.mkdir(parents=True, exist_ok=True)
+    os.chmod(directory, DIRECTORY_MODE)
+    group = os.stat(directory.parent).st_gid
+    if os.stat(directory).st_gid != group:
+        try:
+            os.chown(directory, -1, group)
+        except PermissionError:
+            log.warning("%s: cannot take its parent's group %d", directory, group)
+
+
 def fsync_directory(directory: Path) -> None:
     """Make the directory entries (new names, removals) of ``directory`` durable."""
     fd = os.open(directory, os.O_RDONLY)
@@ -116,7 +150,10 @@ def atomic_h5(target: Path, attrs: Mapping[str, Any]) -> Iterator[Any]:
     starts with a dot and ends in ``.tmp`` so that listings skip it.
     """
     fd, tmp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    os.close(fd)
+    try:
+        share_with_group(fd, target.parent)
+    finally:
+        os.close(fd)
     tmp = Path(tmp_name)
     try:
         with h5py.File(tmp, "w") as f:

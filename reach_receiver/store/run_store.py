@@ -24,12 +24,15 @@ Names of S11 measurements are source names (REACH names) and ``lna`` for the rec
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import importlib.metadata
 import logging
 import platform
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -37,13 +40,16 @@ from typing import Any
 import h5py
 import numpy as np
 
-from calibration.hdf5_io import write_solution_group
+from calibration.data import CalibrationData, SourceData
+from calibration.hdf5_io import RunLayout, write_solution_group
 from calibration.solution import Solution
 
-from .merge import RUN_FILE, merge_run
+from .handover import RECEIVER, HandOver, engine_layout, select
+from .merge import RUN_FILE, Record, merge_run
 from .parts import (
     PARTS_DIR,
     UNITS_C,
+    UNITS_HOURS,
     UNITS_HZ,
     UNITS_K,
     UNITS_NONE,
@@ -55,6 +61,7 @@ from .parts import (
     dataset,
     fsync_directory,
     list_parts,
+    make_shared_directory,
     to_json,
     write_part,
 )
@@ -65,6 +72,30 @@ log = logging.getLogger(__name__)
 DICKE_POSITIONS = ("source", "load", "ns")
 STATUSES = ("completed", "interrupted", "failed")
 _UNIT_SUFFIXES = (("_hz", UNITS_HZ), ("_k", UNITS_K), ("_c", UNITS_C), ("_s", UNITS_S))
+
+
+@dataclass(frozen=True)
+class EngineView:
+    """The run so far as the engine sees it, and what the hand-over chose.
+
+    ``layout`` is ``None`` when there is nothing to show the engine (no LNA S11, or no
+    spectra whose S11 covers the band); ``handover.warnings`` then says why.
+    """
+
+    layout: RunLayout | None
+    handover: HandOver
+
+    @functools.cached_property
+    def data(self) -> CalibrationData | None:
+        """The calibrators as the engine's run, ``None`` without any."""
+        if self.layout is None or not self.layout.calibrators:
+            return None
+        return self.layout.split()[0]
+
+    @functools.cached_property
+    def others(self) -> dict[str, SourceData]:
+        """The sources that are not calibrators (the antenna), by name."""
+        return {} if self.layout is None else self.layout.others()
 
 
 def software_versions() -> dict[str, str]:
@@ -148,7 +179,18 @@ class RunStore:
         self._band_hz = (float(band_hz[0]), float(band_hz[1]))
         self._lock = threading.Lock()
         self._next = 0
+        self._records: list[Record] = []
         self._state = "new"
+
+    @property
+    def channel_width_hz(self) -> float:
+        """The spectrometer's channel width (Hz)."""
+        return self._channel_width_hz
+
+    @property
+    def band_hz(self) -> tuple[float, float]:
+        """The run's band: the engine layout's, unless a calibration chose another."""
+        return self._band_hz
 
     @property
     def run_file(self) -> Path:
@@ -175,10 +217,10 @@ class RunStore:
         """Create the directory and write the run-description part (number 0)."""
         if self._state != "new":
             raise StoreError(f"{self.directory}: run store already {self._state}")
-        self.directory.mkdir(parents=True, exist_ok=True)
+        make_shared_directory(self.directory)
         if (self.directory / RUN_FILE).exists() or list_parts(self.directory):
             raise StoreError(f"{self.directory}: already holds a run; choose a new directory")
-        (self.directory / PARTS_DIR).mkdir(exist_ok=True)
+        make_shared_directory(self.directory / PARTS_DIR)
         fsync_directory(self.directory)
         clean_temporaries(self.directory)
         self._state = "open"
@@ -197,14 +239,50 @@ class RunStore:
             software=to_json(software_versions()),
         )
 
-    def _add(self, kind: str, name: str, timestamp: float, fill: Callable[[Any], None]) -> Path:
+    def _add(self, kind: str, name: str, timestamp: float, fill: Callable[[Any], None]) -> int:
+        """Write one part durably; return its measurement number."""
         with self._lock:
             if self._state != "open":
                 raise StoreError(f"{self.directory}: cannot add a {kind} to a {self._state} run")
-            path = write_part(self.directory, self._next, kind, name, timestamp, fill)
+            number = self._next
+            path = write_part(self.directory, number, kind, name, timestamp, fill)
+            self._records.append(Record(number, kind, name, path, "/"))
             self._next += 1
         log.debug("stored %s", path.name)
-        return path
+        return number
+
+    def records(self, kind: str | None = None) -> list[Record]:
+        """The measurements stored so far (of one kind), in order; no I/O."""
+        with self._lock:
+            return [r for r in self._records if kind is None or r.kind == kind]
+
+    def engine_view(
+        self,
+        band_hz: tuple[float, float] | None = None,
+        *,
+        cycles: Mapping[str, Sequence[int]] | None = None,
+    ) -> EngineView:
+        """What the calibration engine sees of the run so far (the hand-over's rule).
+
+        Parameters
+        ----------
+        band_hz
+            The band; the run's by default.
+        cycles
+            Use exactly these Dicke cycles (source -> measurement numbers).
+        """
+        band = self._band_hz if band_hz is None else band_hz
+        wanted = [r for r in self.records() if r.kind in ("s11", "dicke")]
+        if cycles is not None:
+            chosen = {n for numbers in cycles.values() for n in numbers}
+            wanted = [r for r in wanted if r.kind == "s11" or r.sequence in chosen]
+        with contextlib.ExitStack() as stack:
+            groups = {r.sequence: stack.enter_context(h5py.File(r.file, "r")) for r in wanted}
+            handover = select(groups, band, self._channel_width_hz, cycles=cycles)
+            if RECEIVER not in handover.s11 or not handover.cycles:
+                return EngineView(None, handover)
+            layout = engine_layout(groups, handover, to_json(self._metadata))
+        return EngineView(layout, handover)
 
     def add_s11(
         self,
@@ -215,7 +293,7 @@ class RunStore:
         timestamp: float,
         settings: Mapping[str, Any],
         calibrated: bool,
-    ) -> None:
+    ) -> int:
         """Store one reflection sweep of ``name`` (a source, or ``lna``) with the VNA settings."""
         freq = np.asarray(freq_hz, dtype=float)
         gamma = np.asarray(s11, dtype=complex)
@@ -227,7 +305,7 @@ class RunStore:
             dataset(f, "s11", gamma, UNITS_REFLECTION)
             f.attrs.update(calibrated=bool(calibrated), settings=to_json(dict(settings)))
 
-        self._add("s11", name, timestamp, fill)
+        return self._add("s11", name, timestamp, fill)
 
     def add_dicke(
         self,
@@ -242,10 +320,12 @@ class RunStore:
         counters: Mapping[str, Mapping[str, int]],
         timestamp: float,
         temperature_std_k: float = 0.0,
-    ) -> None:
+        lst_h: Mapping[str, Sequence[float]] | None = None,
+    ) -> int:
         """Store one Dicke cycle: per position the mean spectrum (n_inputs, n_channels).
 
-        ``temperature_std_k`` is the uncertainty of ``temperature_k`` (K).
+        ``temperature_std_k`` is the uncertainty of ``temperature_k`` (K); ``lst_h`` the
+        local sidereal time of each spectrum's mid-point, per position.
         """
         for what, value in (("spectra", spectra), ("timestamps", timestamps)):
             _per_position(what, value)
@@ -267,6 +347,8 @@ class RunStore:
                 g = f.create_group(p)
                 dataset(g, "spectrum", arrays[p], UNITS_POWER)
                 dataset(g, "timestamps", np.asarray(timestamps[p], dtype=float), UNITS_S)
+                if lst_h is not None:
+                    dataset(g, "lst", np.asarray(lst_h[p], dtype=float), UNITS_HOURS)
                 g.attrs.update(
                     integration_s=float(integration_s[p]),
                     n_spectra=int(n_spectra[p]),
@@ -274,7 +356,7 @@ class RunStore:
                     counters=to_json(dict(counters.get(p, {}))),
                 )
 
-        self._add("dicke", source, timestamp, fill)
+        return self._add("dicke", source, timestamp, fill)
 
     def add_spectrum(
         self,
@@ -285,17 +367,20 @@ class RunStore:
         integration_s: float,
         switch_state: Mapping[str, str],
         timestamp: float,
-    ) -> None:
-        """Store one averaged spectrum outside a Dicke cycle."""
+        lst_h: Sequence[float] | None = None,
+    ) -> int:
+        """Store one averaged spectrum outside a Dicke cycle (``lst_h`` per spectrum)."""
 
         def fill(f: Any) -> None:
             dataset(f, "spectrum", np.asarray(spectrum, dtype=float), UNITS_POWER)
             dataset(f, "timestamps", np.asarray(timestamps, dtype=float), UNITS_S)
+            if lst_h is not None:
+                dataset(f, "lst", np.asarray(lst_h, dtype=float), UNITS_HOURS)
             f.attrs.update(
                 integration_s=float(integration_s), switch_state=to_json(dict(switch_state))
             )
 
-        self._add("spectrum", name, timestamp, fill)
+        return self._add("spectrum", name, timestamp, fill)
 
     def add_temperatures(
         self, timestamps: Sequence[float], values_c: np.ndarray, channels: Sequence[str]
@@ -333,15 +418,22 @@ class RunStore:
         self._add("check", name, timestamp, fill)
 
     def add_solution(
-        self, solution: Solution, *, timestamp: float, verification: Mapping[str, Any]
-    ) -> None:
-        """Store a calibration solution (engine layout) and how it was verified."""
+        self,
+        solution: Solution,
+        *,
+        timestamp: float,
+        verification: Mapping[str, Any],
+        handover: HandOver | None = None,
+    ) -> int:
+        """Store a calibration solution, how it was verified, and what it was made from."""
 
         def fill(f: Any) -> None:
             write_solution_group(f.create_group("solution"), solution)
             f.attrs["verification"] = to_json(dict(verification))
+            if handover is not None:
+                f.attrs["handover"] = handover.to_json()
 
-        self._add("solution", solution.method, timestamp, fill)
+        return self._add("solution", solution.method, timestamp, fill)
 
     def add_calibrated(
         self, name: str, freq_hz: Any, mean: Any, std: Any, flags: Any, *, timestamp: float

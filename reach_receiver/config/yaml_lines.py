@@ -1,7 +1,7 @@
 """Safe YAML loading that remembers the line of every key and every list item.
 
-Schedules are checked before anything moves, and every mistake must name its file,
-line and key. :class:`LineLoader` is a :class:`yaml.SafeLoader` (never the full loader:
+Schedules and site files are checked before anything moves, and every mistake must name
+its file, line and key. :class:`LineLoader` is a :class:`yaml.SafeLoader` (never the full loader:
 no Python objects can be built from a schedule) whose mappings and sequences are built
 as :class:`LineDict` and :class:`LineList`: ordinary ``dict``/``list`` subclasses that
 carry ``line`` (where the container starts) and ``lines`` (the 1-based line of each key,
@@ -17,11 +17,14 @@ naturally written that way. YAML 1.1's ``on``/``off``/``yes``/``no`` stay boolea
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import yaml
 from yaml.nodes import MappingNode, Node, SequenceNode
+
+from reach_receiver.errors import ConfigError
 
 MERGE_TAG = "tag:yaml.org,2002:merge"
 #: A schedule is small; aliases must not blow it up ("billion laughs").
@@ -30,7 +33,7 @@ MAX_EXPANDED_NODES = 100_000
 
 @dataclass(frozen=True)
 class Problem:
-    """One mistake in a schedule: where it is, which key, and what is wrong."""
+    """One mistake in a document: where it is, which key, and what is wrong."""
 
     file: str
     line: int
@@ -40,6 +43,17 @@ class Problem:
     def __str__(self) -> str:
         text = f"{self.file}:{self.line}: {self.key}: {self.message}"
         return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+class ProblemsError(ConfigError):
+    """A document with mistakes; ``problems`` holds every one, in file and line order.
+
+    ``str(error)`` gives one ``file:line: key: message`` per line.
+    """
+
+    def __init__(self, problems: Sequence[Problem]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(str(problem) for problem in self.problems))
 
 
 class LineDict(dict[Any, Any]):
@@ -230,3 +244,19 @@ def _first_recursion(value: Any) -> int | None:
         return visit(value)
     except RecursionError:
         return 1
+
+
+def with_lines(value: Any, line: int = 1) -> Any:
+    """A plain document (dicts and lists built in code) as line-carrying containers.
+
+    Every key and item is given ``line``, so that code-built documents go through the
+    same checks as files; their problems then name line 1.
+    """
+    if isinstance(value, LineDict | LineList):
+        return value
+    if isinstance(value, dict):
+        items = {k: with_lines(v, line) for k, v in value.items()}
+        return LineDict(items, line=line, lines=dict.fromkeys(items, line))
+    if isinstance(value, list | tuple):
+        return LineList([with_lines(v, line) for v in value], line=line, lines=[line] * len(value))
+    return value

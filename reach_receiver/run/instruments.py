@@ -1,9 +1,12 @@
 """Every instrument of a site, built from its site file, connected and closed together.
 
-The scheduler's runner works with one :class:`Instruments`; whether the addresses point
-at the deployed hardware or at ``reach-sim``'s simulators makes no difference to it.
-Connecting is explicit (:meth:`Instruments.connect`); a failure part-way closes whatever
-was already open and names the device that failed.
+The run layer works with one :class:`Instruments`; whether the addresses point at the
+deployed hardware or at ``reach-sim``'s simulators makes no difference to it. The
+drivers are built here, from the site's typed settings
+(:mod:`reach_receiver.config.settings`); everything else sees them through the device
+protocols (:mod:`reach_receiver.devices.protocols`). Connecting is explicit
+(:meth:`Instruments.connect`) and idempotent; a failure part-way closes whatever was
+already open and names the device that failed.
 """
 
 from __future__ import annotations
@@ -13,15 +16,22 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 
 from reach_receiver.clock import Clock
+from reach_receiver.config.site import SiteConfig
+from reach_receiver.devices.protocols import (
+    Device,
+    ReflectionMeter,
+    SpectraSource,
+    SwitchMatrix,
+    TemperatureController,
+    Thermometer,
+)
 from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.tc08 import Tc08
 from reach_receiver.devices.tec import SerialTecLink, Tec, TecLink
 from reach_receiver.devices.tec_via_teensy import TeensyTecLink
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.devices.vna import Vna
-from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.paths import FrontEnd
-from reach_receiver.site import SiteConfig
 from reach_receiver.transports.tc08_library import load_libusbtc08
 
 log = logging.getLogger(__name__)
@@ -29,17 +39,22 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class Instruments:
-    """The drivers of one site, not yet connected."""
+    """The drivers of one site, not yet connected.
+
+    ``links`` lists the devices :meth:`connect` opens, in order; the TEC behind the
+    Teensy is opened separately (:meth:`connect_tec`), once its rail is on.
+    """
 
     site: SiteConfig
     clock: Clock
-    teensy: Teensy
-    vna: Vna
-    spectrometer: Spectrometer
-    tc08: Tc08
-    tec_link: TecLink
-    tec: Tec
+    teensy: SwitchMatrix
+    vna: ReflectionMeter
+    spectrometer: SpectraSource
+    tc08: Thermometer
+    tec: TemperatureController
     frontend: FrontEnd
+    links: tuple[tuple[str, Device], ...]
+    tec_link: Device
     _stack: ExitStack = field(default_factory=ExitStack)
     connected: bool = False
     tec_connected: bool = False
@@ -47,50 +62,36 @@ class Instruments:
     @classmethod
     def from_site(cls, site: SiteConfig, clock: Clock) -> Instruments:
         """Build every driver from the site file (no I/O)."""
-        teensy_cfg = site.device("teensy")
-        teensy = Teensy(str(teensy_cfg["port"]), timeout_s=float(teensy_cfg.get("timeout_s", 1.0)))
-        vna_cfg = site.device("vna")
-        vna = Vna(
-            str(vna_cfg["resource"]), timeout_s=float(vna_cfg.get("timeout_s", 10.0)), clock=clock
-        )
-        itpm_cfg = site.device("spectrometer")
+        settings = site.devices
+        teensy = Teensy(settings.teensy.port, timeout_s=settings.teensy.timeout_s)
+        vna = Vna(settings.vna.resource, timeout_s=settings.vna.timeout_s, clock=clock)
+        itpm = settings.spectrometer
         spectrometer = Spectrometer(
-            (str(itpm_cfg.get("host", "0.0.0.0")), int(itpm_cfg.get("port", 4660))),
-            timeout_s=float(itpm_cfg.get("timeout_s", 5.0)),
-            clock=clock,
-            period_s=float(itpm_cfg["period_s"]) if "period_s" in itpm_cfg else None,
+            (itpm.host, itpm.port), timeout_s=itpm.timeout_s, clock=clock, period_s=itpm.period_s
         )
-        tc08_cfg = site.device("tc08")
-        library_path = tc08_cfg.get("library")
-        tc08 = Tc08(
-            _LazyLibrary(None if library_path is None else str(library_path)),  # type: ignore[arg-type]
-            clock,
-            mains_hz=int(tc08_cfg.get("mains_hz", 50)),
-        )
-        tec_cfg = site.device("tec")
+        library = _LazyLibrary(settings.tc08.library)
+        tc08 = Tc08(library, clock, mains_hz=settings.tc08.mains_hz)  # type: ignore[arg-type]
         link: TecLink
-        if tec_cfg.get("via") == "teensy":
+        if settings.tec.via == "teensy":
             link = TeensyTecLink(teensy)
-        elif "port" in tec_cfg:
-            timeout_s = float(tec_cfg.get("timeout_s", 1.0))
-            link = SerialTecLink(str(tec_cfg["port"]), timeout_s=timeout_s)
         else:
-            raise ConfigError(f"{site.source}: devices.tec needs 'via: teensy' or a 'port'")
+            link = SerialTecLink(str(settings.tec.port), timeout_s=settings.tec.timeout_s)
         tec = Tec(link, clock)
         frontend = FrontEnd(teensy, site.sources)
-        return cls(site, clock, teensy, vna, spectrometer, tc08, link, tec, frontend)
+        links: tuple[tuple[str, Device], ...] = (
+            ("teensy", teensy),
+            ("vna", vna),
+            ("spectrometer", spectrometer),
+            ("tc08", tc08),
+        )
+        return cls(site, clock, teensy, vna, spectrometer, tc08, tec, frontend, links, tec)
 
     def connect(self) -> None:
         """Connect every instrument (once); on a failure, close those already connected."""
         if self.connected:
             return
         with ExitStack() as stack:
-            for name, device in (
-                ("teensy", self.teensy),
-                ("vna", self.vna),
-                ("spectrometer", self.spectrometer),
-                ("tc08", self.tc08),
-            ):
+            for name, device in self.links:
                 log.info("connecting %s", name)
                 device.connect()
                 stack.callback(device.close)
@@ -101,8 +102,8 @@ class Instruments:
         """Connect the TEC controller once (behind the Teensy, its rail must be on)."""
         if self.tec_connected:
             return
-        self.tec.connect()
-        self._stack.callback(self.tec.close)
+        self.tec_link.connect()
+        self._stack.callback(self.tec_link.close)
         self.tec_connected = True
 
     def close(self) -> None:

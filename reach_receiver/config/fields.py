@@ -1,8 +1,9 @@
-"""Typed, range-checked reading of one step's arguments, every mistake recorded.
+"""Typed, range-checked reading of a YAML mapping, every mistake recorded.
 
-A :class:`Fields` wraps the mapping written under a step (``dicke: {sources: [hot],
-seconds: 600}``). On creation it reports every key it does not know (with the closest
-known one); each accessor then substitutes variables, checks the type and the range,
+A :class:`Fields` wraps one mapping as written: a schedule step's arguments (``dicke:
+{sources: [hot], seconds: 600}``) or a section of the site file (``devices.vna``). On
+creation it reports every key it does not know (with the closest known one); each
+accessor then substitutes variables (schedules only), checks the type and the range,
 records a :class:`~.yaml_lines.Problem` naming the file, line and dotted key when
 something is wrong, and returns a harmless fallback so that reading goes on and every
 mistake of the file is found in one pass.
@@ -12,21 +13,35 @@ from __future__ import annotations
 
 import difflib
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-from .variables import UNRESOLVED, Variables
 from .yaml_lines import LineDict, LineList, Problem
 
 
-class _Required:
+class _Marker:
+    def __init__(self, name: str) -> None:
+        self.name = name
+
     def __repr__(self) -> str:
-        return "REQUIRED"
+        return self.name
 
 
 #: Default marking a key that must be written.
-REQUIRED: Any = _Required()
+REQUIRED: Any = _Marker("REQUIRED")
+#: A value whose substitution failed (its problem is already reported).
+UNRESOLVED: Any = _Marker("UNRESOLVED")
 _MISSING: Any = object()
+
+#: ``resolve(value, file, line, key)``: a value with its references substituted, or
+#: :data:`UNRESOLVED` after reporting why not.
+Resolver = Callable[[Any, str, int, str], Any]
+
+
+def _as_written(value: Any, file: str, line: int, key: str) -> Any:
+    """The resolver of documents without variables: every value as written."""
+    del file, line, key
+    return value
 
 
 def closest(word: object, known: Iterable[str]) -> str:
@@ -63,10 +78,11 @@ class Fields:
         Its dotted key (``dicke``, ``tec.wait``), prefixed to each argument's name.
     allowed
         The argument names this mapping may hold.
-    variables
-        Resolves ``${...}`` in values.
     problems
         Where mistakes are recorded.
+    resolve
+        Substitutes ``${...}`` in values (a schedule's variables); values are taken as
+        written by default.
     """
 
     def __init__(
@@ -76,13 +92,13 @@ class Fields:
         file: str,
         key: str,
         allowed: Sequence[str],
-        variables: Variables,
         problems: list[Problem],
+        resolve: Resolver = _as_written,
     ) -> None:
         self.args = args
         self.file = file
         self.key = key
-        self.variables = variables
+        self.resolve = resolve
         self.problems = problems
         self._start = len(problems)
         for name in args:
@@ -119,9 +135,7 @@ class Fields:
                 self.report(name, "missing required key", self.args.line)
                 return UNRESOLVED
             return default
-        return self.variables.resolve(
-            self.args[name], self.file, self.line(name), f"{self.key}.{name}"
-        )
+        return self.resolve(self.args[name], self.file, self.line(name), f"{self.key}.{name}")
 
     # ----------------------------------------------------------------- scalars
     def number(
@@ -254,6 +268,6 @@ class Fields:
             file=self.file,
             key=f"{self.key}.{name}",
             allowed=allowed,
-            variables=self.variables,
             problems=self.problems,
+            resolve=self.resolve,
         )

@@ -1,8 +1,10 @@
-"""Measurement procedures: a Dicke cycle, an S11, temperatures, and their hand-over to the engine.
+"""Measurement procedures: a Dicke cycle, an S11, and the background temperature log.
 
-These are the building blocks the scheduler runs and the loop test drives. They depend
-on small protocols, not on driver classes, so anything that integrates spectra, measures
-a reflection or reads thermocouples can stand in.
+These are the building blocks the step kinds run and the loop test drives. They depend
+on the device protocols (:mod:`reach_receiver.devices.protocols`), not on driver
+classes, so anything that integrates spectra, measures a reflection or reads
+thermocouples can stand in. What the engine gets of them is decided in one place, the
+store's hand-over (:mod:`reach_receiver.store.handover`).
 
 A Dicke cycle (thesis 2.1.1, eq. 3.1) integrates three positions in turn: the source, the
 reference load (the ambient 50 ohm calibrator, as deployed) and the noise source with its
@@ -13,67 +15,44 @@ spectrum after each switch change is discarded: it may straddle the change.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
-from calibration.data import Integration, SourceData
 from reach_receiver.clock import Clock
+from reach_receiver.devices.protocols import ReflectionMeter, SpectraSource, Thermometer
 from reach_receiver.devices.spectrometer import AccumulatedSpectrum
 from reach_receiver.devices.tc08 import Tc08Reading
-from reach_receiver.devices.vna import S11Measurement
+from reach_receiver.devices.vna_settings import S11Measurement
 from reach_receiver.errors import DeviceError, ReceiverError
-from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD, SOURCE_THERMOCOUPLE
+from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD
 from reach_receiver.frontend.paths import FrontEnd
+from reach_receiver.store.run_store import DICKE_POSITIONS
 
+__all__ = [
+    "DICKE_POSITIONS",
+    "DICKE_REFERENCES",
+    "DickeCycle",
+    "TemperatureLogger",
+    "source_temperature",
+    "take_dicke_cycle",
+    "take_s11",
+]
 log = logging.getLogger(__name__)
 
-FloatArray = NDArray[np.float64]
-ComplexArray = NDArray[np.complex128]
+#: What each Dicke position connects to the LNA, the source itself aside.
+DICKE_REFERENCES = {"load": REFERENCE_LOAD, "ns": NOISE_SOURCE}
 
-#: Dicke positions in the order they are taken, and the source each one connects.
-DICKE_POSITIONS = ("source", "load", "ns")
+#: ``progress(position, averaged, n_spectra)`` after each spectrum of a Dicke cycle.
+CycleProgress = Callable[[str, int, int], None]
 
 #: Noise of one thermocouple reading when too few readings exist to measure it (K).
 THERMOCOUPLE_NOISE_K = 0.1
-
-
-class SpectraSource(Protocol):
-    """What a Dicke cycle needs of the spectrometer."""
-
-    @property
-    def period(self) -> float | None:
-        """Integration time of one spectrum (clock seconds), once known."""
-        ...
-
-    def integrate(
-        self, n_spectra: int, *, discard: int = 1, timeout_s: float | None = None
-    ) -> AccumulatedSpectrum:
-        """Average ``n_spectra`` complete spectra after dropping ``discard``."""
-        ...
-
-
-class Thermometer(Protocol):
-    """What a Dicke cycle needs of the thermocouple logger."""
-
-    def read(self) -> Tc08Reading:
-        """Read every channel once."""
-        ...
-
-
-class ReflectionMeter(Protocol):
-    """What an S11 measurement needs of the VNA."""
-
-    def measure_s11(self) -> S11Measurement:
-        """One corrected sweep."""
-        ...
 
 
 class TemperatureLogger:
@@ -125,7 +104,7 @@ class TemperatureLogger:
             else:
                 with self._lock:
                     self._readings.append(reading)
-            self.clock.sleep(self.period_s)
+            self.clock.wait(self._stop, self.period_s)
 
     def readings(self, start: float = -math.inf, stop: float = math.inf) -> tuple[Tc08Reading, ...]:
         """Readings taken in ``[start, stop]`` (clock time)."""
@@ -172,27 +151,60 @@ def take_dicke_cycle(
     n_spectra: int,
     temperatures: TemperatureLogger | None = None,
     discard: int = 1,
+    progress: CycleProgress | None = None,
 ) -> DickeCycle:
     """Integrate ``source``, the reference load and the noise source, ``n_spectra`` each.
 
     With a running :class:`TemperatureLogger`, each position keeps the readings taken
-    between the start of its first averaged spectrum and the end of its last.
+    while its averaged spectra integrated (:func:`readings_during`).
+    ``progress`` is called after every spectrum; it may stop the cycle by raising.
     """
-    connects = {"source": source, "load": REFERENCE_LOAD, "ns": NOISE_SOURCE}
+    connects = {"source": source, **DICKE_REFERENCES}
     spectra: dict[str, AccumulatedSpectrum] = {}
     seconds: dict[str, float] = {}
     readings: dict[str, tuple[Tc08Reading, ...]] = {}
     states: dict[str, Mapping[str, str]] = {}
     for position in DICKE_POSITIONS:
         states[position] = frontend.connect(connects[position], "lna").as_pins()
-        accumulated = spectrometer.integrate(n_spectra, discard=discard)
+        report = None
+        if progress is not None:
+            report = _position_progress(progress, position)
+        accumulated = spectrometer.integrate(n_spectra, discard=discard, on_spectrum=report)
         spectra[position] = accumulated
         seconds[position] = integration_seconds(accumulated, spectrometer.period)
-        end = accumulated.stop_time + (spectrometer.period or 0.0)
         if temperatures is not None:
-            readings[position] = temperatures.readings(accumulated.start_time, end)
+            readings[position] = readings_during(
+                temperatures, accumulated.timestamps, spectrometer.period or 0.0
+            )
         log.info("%s: %s position, %d spectra", source, position, accumulated.n_spectra)
     return DickeCycle(source, spectra, seconds, readings, states)
+
+
+def readings_during(
+    temperatures: TemperatureLogger, starts: Sequence[float], period_s: float
+) -> tuple[Tc08Reading, ...]:
+    """The readings taken while one of the spectra integrated, ``[t, t + period_s]``.
+
+    Spectra that were lost or skipped leave gaps; a reading in a gap did not see what the
+    averaged spectra saw (the heated load drifts), so it is left out.
+    """
+    ordered = sorted(starts)
+    if not ordered:
+        return ()
+    within = temperatures.readings(ordered[0], ordered[-1] + period_s)
+    kept = []
+    for reading in within:
+        index = bisect.bisect_right(ordered, reading.timestamp) - 1
+        if index >= 0 and reading.timestamp <= ordered[index] + period_s:
+            kept.append(reading)
+    return tuple(kept)
+
+
+def _position_progress(progress: CycleProgress, position: str) -> Callable[[int, int], None]:
+    def report(done: int, total: int) -> None:
+        progress(position, done, total)
+
+    return report
 
 
 def integration_seconds(accumulated: AccumulatedSpectrum, period_s: float | None) -> float:
@@ -222,64 +234,16 @@ def mean_temperature_k(readings: Sequence[Tc08Reading], port: int) -> float:
     return float(np.mean(values)) + 273.15
 
 
-def interpolate_s11(measurement: S11Measurement, freq_hz: FloatArray) -> ComplexArray:
-    """The reflection at ``freq_hz``: cubic splines through the real and imaginary parts.
+def source_temperature(cycle: DickeCycle, port: int | None) -> tuple[float | None, float]:
+    """A source's temperature during its own integration and its standard error (K).
 
-    The VNA's sweep is coarser than the spectrometer's channels; reflections of the
-    REACH sources are smooth on the sweep's 100 kHz grid (the 10 m cable's ripple has a
-    period of about 10 MHz), so a spline loses nothing. Extrapolation is refused.
+    The mean of TC-08 ``port``'s good readings while the source position integrated
+    (the port comes from the site's thermocouple table); ``(None, 0)`` when the source
+    has no thermocouple or no usable reading, so that it cannot serve as a calibrator.
     """
-    f = np.asarray(freq_hz, dtype=float)
-    lo, hi = measurement.freq_hz[0], measurement.freq_hz[-1]
-    if f.min() < lo or f.max() > hi:
-        raise ReceiverError(
-            f"S11 sweep {lo / 1e6:.3f}-{hi / 1e6:.3f} MHz does not cover "
-            f"{f.min() / 1e6:.3f}-{f.max() / 1e6:.3f} MHz"
-        )
-    real = CubicSpline(measurement.freq_hz, measurement.s11.real)(f)
-    imag = CubicSpline(measurement.freq_hz, measurement.s11.imag)(f)
-    return np.asarray(real + 1j * imag, dtype=complex)
-
-
-def source_data(
-    cycle: DickeCycle,
-    s11: S11Measurement,
-    freq_hz: FloatArray,
-    channels: slice,
-    spectrometer_input: int = 0,
-    known_temperature: bool = True,
-    thermocouple: int | None = None,
-) -> SourceData:
-    """The engine's view of one source: S11 at the channels, Dicke powers, temperature.
-
-    The temperature is the mean of TC-08 port ``thermocouple`` (table 2.2's port of the
-    source by default) during the source's own integration.
-    """
-    spectra = {k: v.mean[spectrometer_input, channels] for k, v in cycle.spectra.items()}
-    temperature, temperature_std = None, 0.0
-    if known_temperature:
-        port = SOURCE_THERMOCOUPLE[cycle.source] if thermocouple is None else thermocouple
-        temperature = np.full(freq_hz.shape, cycle.temperature_k(port))
-        temperature_std = cycle.temperature_std_k(port)
-    return SourceData(
-        name=cycle.source,
-        gamma=interpolate_s11(s11, freq_hz),
-        p_source=spectra["source"],
-        p_load=spectra["load"],
-        p_ns=spectra["ns"],
-        integration=Integration(
-            cycle.integration_s["source"], cycle.integration_s["load"], cycle.integration_s["ns"]
-        ),
-        temperature_k=temperature,
-        temperature_std_k=temperature_std,
-    )
-
-
-def band_channels(
-    channel_width_hz: float, f_lo_hz: float, f_hi_hz: float
-) -> tuple[slice, FloatArray]:
-    """Channels whose centres ``k * width`` lie in ``[f_lo, f_hi]``, and those centres."""
-    first = math.ceil(f_lo_hz / channel_width_hz - 1e-9)
-    last = math.floor(f_hi_hz / channel_width_hz + 1e-9)
-    channels = slice(first, last + 1)
-    return channels, channel_width_hz * np.arange(first, last + 1, dtype=float)
+    if port is None or not cycle.temperatures.get("source"):
+        return None, 0.0
+    try:
+        return cycle.temperature_k(port), cycle.temperature_std_k(port)
+    except ReceiverError:
+        return None, 0.0

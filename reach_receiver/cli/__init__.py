@@ -1,0 +1,12 @@
+"""The receiver side's commands: ``reach-run`` and ``reach-sim``.
+
+Each is a thin layer over the packages below it: ``reach-run`` over the run layer
+(:mod:`reach_receiver.run`), ``reach-sim`` over the simulated receiver
+(:mod:`reach_receiver.sim`). Failures an operator can act on print one line without a
+traceback and exit non-zero (2 for invalid input, 1 for a run that did not complete).
+"""
+
+from .run import run_main
+from .sim import sim_main
+
+__all__ = ["run_main", "sim_main"]

@@ -1,0 +1,217 @@
+"""``reach-run``: check a schedule before anything moves, then run it and summarise.
+
+A thin command over the run layer (:class:`~reach_receiver.run.session.RunSession`):
+
+1. The site file is found (``--site``, else ``$REACH_SITE``, else
+   ``/etc/reach/site.yaml``; with ``--sim`` the simulated receiver's) and checked, and
+   the schedule is compiled against it; every mistake is printed as ``file:line: key:
+   message``: exit 2, and no device has been contacted. The estimated duration is
+   printed.
+2. ``--validate`` stops there; ``--dry-run`` prints the step list with its timing.
+3. Otherwise the run goes, with progress on standard error. SIGINT (Ctrl-C), SIGTERM
+   and SIGHUP (a dropped SSH session) ask it to stop: the front-end goes to its safe
+   state, the run file is closed with the reason, exit 1. A second signal stops at once.
+4. A completed run prints its checks, the solution (orders, noise scale, distance to the
+   noise floor) and, with ``--sim``, the actual calibration error against the
+   simulator's truth.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from types import FrameType
+
+from reach_receiver.clock import Clock, CompressedClock, SystemClock
+from reach_receiver.config.site import SiteConfig, find_site, load_site
+from reach_receiver.errors import ReceiverError
+from reach_receiver.run.context import NoProgress, Progress
+from reach_receiver.run.session import RunFailed, RunSession, RunSummary
+from reach_receiver.schedule.compile import ScheduleError
+from reach_receiver.schedule.timing import format_timeline, hms
+from reach_receiver.sim.receiver import (
+    DEFAULT_COMPRESSION,
+    SimulatedReceiver,
+    SimulationSettings,
+    simulated_site,
+    spectrum_period_for,
+)
+
+from .display import PlainProgress, RichProgressDisplay
+from .logs import add_version, configure_logging
+
+#: Signals that stop a run cooperatively; a second one stops it at once.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The command line of ``reach-run``."""
+    p = argparse.ArgumentParser(
+        prog="reach-run",
+        description="Check and run a YAML schedule against the receiver (a site file) or the "
+        "simulated receiver (--sim).",
+    )
+    p.add_argument("schedule", type=Path, help="the schedule, e.g. schedules/calibrate.yaml")
+    target = p.add_mutually_exclusive_group()
+    target.add_argument(
+        "--site",
+        type=Path,
+        help="site file of the instrument (default: $REACH_SITE, else /etc/reach/site.yaml)",
+    )
+    target.add_argument(
+        "--sim", action="store_true", help="run against the simulated receiver, in-process"
+    )
+    p.add_argument("--validate", action="store_true", help="check the schedule, print its duration")
+    p.add_argument("--dry-run", action="store_true", help="print the step list and its timing")
+    p.add_argument("--out", type=Path, default=Path("runs"), help="directory of run directories")
+    p.add_argument(
+        "--compression",
+        type=float,
+        default=DEFAULT_COMPRESSION,
+        help=f"--sim: simulated seconds per real second (default {DEFAULT_COMPRESSION:g})",
+    )
+    p.add_argument(
+        "--spectrum-period",
+        type=float,
+        default=None,
+        help="--sim: the simulated iTPM's seconds per spectrum (default: compression / 100, "
+        "at least 1)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on standard error")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every action")
+    add_version(p)
+    return p
+
+
+def run_main(argv: Sequence[str] | None = None) -> int:
+    """``reach-run``: validate, then run a schedule; exit 0 only if it completed."""
+    args = parser().parse_args(argv)
+    configure_logging(args.verbose)
+    settings = SimulationSettings(
+        compression=args.compression,
+        spectrum_period_s=args.spectrum_period or spectrum_period_for(args.compression),
+        seed=args.seed,
+    )
+    try:
+        site = simulated_site(settings) if args.sim else load_site(find_site(args.site))
+        session = RunSession.prepare(args.schedule, site, _clock(site), args.out)
+    except ScheduleError as err:
+        print(f"reach-run: {args.schedule} is not valid; nothing was run:", file=sys.stderr)
+        print(str(err), file=sys.stderr)
+        return 2
+    except ReceiverError as err:
+        print(f"reach-run: {err}", file=sys.stderr)
+        return 2
+    entries = session.timeline()
+    total_s = max((e.start_s + e.duration_s for e in entries if e.depth == 0), default=0.0)
+    steps = len(session.schedule.steps)
+    print(f"{args.schedule}: {steps} steps, estimated duration {hms(total_s)}", flush=True)
+    if args.dry_run:
+        print(format_timeline(entries))
+        return 0
+    if args.validate:
+        return 0
+    with contextlib.ExitStack() as stack:
+        sim: SimulatedReceiver | None = None
+        if args.sim:
+            sim = stack.enter_context(SimulatedReceiver(settings))
+            session.site, session.clock = sim.site(), sim.clock
+        session.metadata = _metadata(args, session.site, sim)
+        session.progress = stack.enter_context(_display(session.clock, args.quiet))
+        stack.enter_context(_stopping_on_signals(session))
+        try:
+            summary = session.run()
+        except RunFailed as err:
+            print(f"reach-run: run {err.status}: {err}", file=sys.stderr)
+            if err.run_file is not None:
+                print(f"reach-run: measurements so far are in {err.run_file}", file=sys.stderr)
+            return 1
+        _print_summary(summary, sim)
+    return 0
+
+
+def _clock(site: SiteConfig) -> Clock:
+    """The wall clock, or a ``reach-sim``'s shared compressed clock."""
+    if site.simulation:  # a reach-sim in another process: share its simulated time
+        return CompressedClock(
+            site.simulation["compression"],
+            site.simulation["start"],
+            site.simulation["monotonic_origin"],
+        )
+    return SystemClock()
+
+
+def _metadata(
+    args: argparse.Namespace, site: SiteConfig, sim: SimulatedReceiver | None
+) -> dict[str, object]:
+    return {
+        "simulated": sim is not None or bool(site.simulation),
+        "compression": args.compression if sim is not None else 1.0,
+        "seed": args.seed if sim is not None else None,
+        "site_file": site.source,
+    }
+
+
+@contextlib.contextmanager
+def _display(clock: Clock, quiet: bool) -> Iterator[Progress]:
+    if quiet:
+        yield NoProgress()
+    elif sys.stderr.isatty():
+        with RichProgressDisplay(clock) as display:
+            yield display
+    else:
+        yield PlainProgress(clock)
+
+
+@contextlib.contextmanager
+def _stopping_on_signals(session: RunSession) -> Iterator[None]:
+    """SIGINT, SIGTERM, SIGHUP stop the run cooperatively; a second one at once."""
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        del frame
+        name = signal.Signals(signum).name
+        if session.token.requested:
+            raise KeyboardInterrupt(f"second signal {name}")
+        session.stop(f"signal {name}")
+
+    previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for handled, handler in previous.items():
+            signal.signal(handled, handler)
+
+
+def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
+    print(f"run file: {summary.run_file}")
+    print(f"simulated/real time of the run: {hms(summary.elapsed_s)}")
+    for check in summary.checks:
+        print(f"check {check.name}: {'PASS' if check.passed else 'FAIL'} ({check.detail})")
+    outcome = summary.calibration
+    if outcome is None:
+        return
+    solution, handover = outcome.solution, outcome.handover
+    cycles = sum(len(v) for v in handover.cycles.values())
+    print(
+        f"hand-over: {handover.band_hz[0] / 1e6:g}-{handover.band_hz[1] / 1e6:g} MHz, "
+        f"{len(handover.calibrators)} calibrators, {cycles} Dicke cycles, "
+        f"{len(handover.s11)} S11s (recorded in the run file)"
+    )
+    print(f"solution: orders {solution.orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
+    print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
+    floor, predicted = outcome.floor_k, outcome.predicted_k
+    print(
+        f"  on {outcome.validation.name!r}: noise floor {1e3 * floor:.3f} mK, predicted "
+        f"calibration std {1e3 * predicted:.3f} mK, distance to floor {predicted / floor:.3f}"
+    )
+    if sim is not None:
+        actual = sim.physics.calibration_error_k(solution, outcome.data, outcome.validation)
+        print(
+            f"  actual calibration error against the simulator's truth: "
+            f"{1e3 * actual:.3f} mK = {actual / floor:.3f} x floor"
+        )

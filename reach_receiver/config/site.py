@@ -1,0 +1,374 @@
+"""The site file: where each instrument is reached, and what the front-end holds.
+
+A YAML mapping, safe-loaded with line numbers; every mistake is reported at once as
+``file:line: key: message`` (:class:`SiteError`) and unknown keys are refused::
+
+    site: {name: REACH Karoo, longitude_deg: 21.52, latitude_deg: -30.97}
+    devices:                          # schemas and defaults: reach_receiver.config.settings
+      teensy: {port: /dev/serial/by-id/usb-Teensyduino_USB_Serial_12345-if00}
+      vna: {resource: "TCPIP0::192.168.10.20::5025::SOCKET", timeout_s: 20}
+      tec: {via: teensy}              # or {via: serial, port: /dev/ttyUSB0}
+      tc08: {library: /opt/picotech/lib/libusbtc08.so}
+      spectrometer: {host: 0.0.0.0, port: 4660, period_s: 1.0}   # period_s required
+    calibration: {band_hz: [50.0e+6, 130.0e+6]}   # the engine's band; this is the default
+    references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
+    sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
+    thermocouples: {hot: 2}                 # source -> TC-08 port, changes to table 2.2
+
+``reach-sim`` prints one of these with the simulated instruments' addresses and a
+``simulation`` section (its compressed clock), which ``reach-run`` then shares.
+
+Where the file is: ``--site``, else ``$REACH_SITE``, else ``/etc/reach/site.yaml``
+(:func:`find_site`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from reach_receiver.errors import ConfigError
+from reach_receiver.frontend.layout import (
+    REACH_SOURCES,
+    SOURCE_THERMOCOUPLE,
+    SWITCH_POSITIONS,
+    SourcePosition,
+)
+
+from .fields import REQUIRED, Fields, closest, type_name
+from .settings import DEVICE_SCHEMAS, DeviceSettings, keys_of, read_settings
+from .yaml_lines import LineDict, Problem, ProblemsError, load_yaml, with_lines
+
+#: The calibration band when the site does not set one (thesis 4.1: REACH's 50-130 MHz).
+DEFAULT_BAND_HZ = (50e6, 130e6)
+#: The site file of the deployed instrument, when neither ``--site`` nor ``$REACH_SITE``.
+SYSTEM_SITE = Path("/etc/reach/site.yaml")
+SITE_ENVIRONMENT = "REACH_SITE"
+
+SECTIONS = (
+    "site",
+    "devices",
+    "calibration",
+    "references",
+    "sources",
+    "thermocouples",
+    "simulation",
+)
+_PLACE_KEYS = ("name", "longitude_deg", "latitude_deg")
+_REFERENCE_KEYS = ("test_load",)
+_SIMULATION_KEYS = ("compression", "start", "monotonic_origin")
+
+
+class SiteError(ProblemsError):
+    """A site file with mistakes, each ``file:line: key: message``."""
+
+
+@dataclass(frozen=True)
+class SiteConfig:
+    """A checked site file: the place, the instruments, and the front-end's tables.
+
+    ``sources`` is table A.2 with the site's changes, ``thermocouples`` table 2.2 with
+    its changes; ``simulation`` holds a ``reach-sim``'s shared clock (empty on site).
+    """
+
+    devices: DeviceSettings
+    name: str = "unnamed site"
+    longitude_deg: float = 0.0
+    latitude_deg: float = 0.0
+    band_hz: tuple[float, float] = DEFAULT_BAND_HZ
+    references: Mapping[str, str] = field(default_factory=dict)
+    simulation: Mapping[str, float] = field(default_factory=dict)
+    sources: Mapping[str, SourcePosition] = field(default_factory=lambda: dict(REACH_SOURCES))
+    thermocouples: Mapping[str, int] = field(default_factory=lambda: dict(SOURCE_THERMOCOUPLE))
+    source: str = "<memory>"
+
+    def to_yaml(self) -> str:
+        """The site file text that reproduces this configuration."""
+        document: dict[str, Any] = {
+            "site": {
+                "name": self.name,
+                "longitude_deg": self.longitude_deg,
+                "latitude_deg": self.latitude_deg,
+            },
+            "devices": {
+                name: {k: v for k, v in dataclasses.asdict(settings).items() if v is not None}
+                for name, settings in vars(self.devices).items()
+            },
+        }
+        if self.band_hz != DEFAULT_BAND_HZ:
+            document["calibration"] = {"band_hz": list(self.band_hz)}
+        if self.references:
+            document["references"] = dict(self.references)
+        if self.simulation:
+            document["simulation"] = dict(self.simulation)
+        changed: dict[str, dict[str, int] | None] = {
+            k: _position_yaml(v) for k, v in self.sources.items() if REACH_SOURCES.get(k) != v
+        }
+        changed.update({k: None for k in REACH_SOURCES if k not in self.sources})
+        if changed:
+            document["sources"] = changed
+        ports = {k: v for k, v in self.thermocouples.items() if SOURCE_THERMOCOUPLE.get(k) != v}
+        if ports:
+            document["thermocouples"] = ports
+        return yaml.safe_dump(document, sort_keys=False)
+
+
+class _Reader:
+    """Reads one site document, collecting every problem."""
+
+    def __init__(self, document: LineDict, file: str) -> None:
+        self.document = document
+        self.file = file
+        self.problems: list[Problem] = []
+        for key in document:
+            if key not in SECTIONS:
+                known = ", ".join(SECTIONS)
+                message = f"unknown section '{key}'{closest(key, SECTIONS)} (known: {known})"
+                self.report(document.line_of(key), str(key), message)
+
+    def section(self, name: str, allowed: tuple[str, ...]) -> Fields:
+        """A reader of one top-level section (empty when absent or not a mapping)."""
+        value = self.document.get(name)
+        line = self.document.line_of(name)
+        if value is not None and not isinstance(value, LineDict):
+            self.report(line, name, f"must be a mapping, not {type_name(value)}")
+        if not isinstance(value, LineDict):
+            value = LineDict(line=line)
+        return Fields(value, file=self.file, key=name, allowed=allowed, problems=self.problems)
+
+    def report(self, line: int, key: str, message: str) -> None:
+        self.problems.append(Problem(self.file, line, key, message))
+
+
+def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
+    """Check and convert a loaded site document; every mistake is reported at once.
+
+    Raises
+    ------
+    SiteError
+        With one ``file:line: key: message`` per mistake.
+    """
+    document = with_lines(document)
+    if not isinstance(document, LineDict):
+        message = f"a site file is a mapping of {', '.join(SECTIONS)}, not {type_name(document)}"
+        raise SiteError([Problem(source, 1, "<document>", message)])
+    reader = _Reader(document, source)
+    place = reader.section("site", _PLACE_KEYS)
+    longitude = place.number("longitude_deg", 0.0, low=-180.0, high=360.0)
+    latitude = place.number("latitude_deg", 0.0, low=-90.0, high=90.0)
+    name = place.text("name", "unnamed site") or "unnamed site"
+    devices = _devices(reader)
+    band = _band(reader)
+    references = reader.section("references", _REFERENCE_KEYS)
+    written_references = {k: references.text(k) for k in _REFERENCE_KEYS if references.has(k)}
+    simulation = reader.section("simulation", _SIMULATION_KEYS)
+    clock = {k: simulation.number(k, REQUIRED) for k in _SIMULATION_KEYS if simulation.has(k)}
+    if clock and set(clock) != set(_SIMULATION_KEYS):
+        missing = sorted(set(_SIMULATION_KEYS) - set(clock))
+        simulation.report("<clock>", f"needs all of {', '.join(_SIMULATION_KEYS)}: {missing}")
+    sources = _sources(reader)
+    thermocouples = _thermocouples(reader)
+    if reader.problems or devices is None or band is None:
+        raise SiteError(sorted(dict.fromkeys(reader.problems), key=lambda p: p.line))
+    return SiteConfig(
+        devices=devices,
+        name=name,
+        longitude_deg=longitude,
+        latitude_deg=latitude,
+        band_hz=band,
+        references={k: v for k, v in written_references.items() if v is not None},
+        simulation=clock,
+        sources=sources,
+        thermocouples=thermocouples,
+        source=source,
+    )
+
+
+def _devices(reader: _Reader) -> DeviceSettings | None:
+    devices = reader.section("devices", tuple(DEVICE_SCHEMAS))
+    read: dict[str, Any] = {}
+    for name, schema in DEVICE_SCHEMAS.items():
+        if not devices.has(name):
+            devices.report(name, "missing required section", devices.args.line)
+            continue
+        section = devices.mapping(name, keys_of(schema))
+        if section is None:
+            section = Fields(
+                LineDict(line=devices.line(name)),
+                file=reader.file,
+                key=f"devices.{name}",
+                allowed=keys_of(schema),
+                problems=reader.problems,
+            )
+        read[name] = read_settings(schema, section)
+        if name == "tec" and read[name] is not None:
+            tec = read[name]
+            if (tec.via == "serial") != (tec.port is not None):
+                section.report("port", "give a port with 'via: serial', and only then")
+                read[name] = None
+    if any(v is None for v in read.values()) or len(read) != len(DEVICE_SCHEMAS):
+        return None
+    return DeviceSettings(**read)
+
+
+def _band(reader: _Reader) -> tuple[float, float] | None:
+    calibration = reader.section("calibration", ("band_hz",))
+    if not calibration.has("band_hz"):
+        return DEFAULT_BAND_HZ
+    written = calibration.raw("band_hz")
+    line = calibration.line("band_hz")
+    if not isinstance(written, list) or len(written) != 2:
+        calibration.report("band_hz", f"must be [low, high] in Hz, not {type_name(written)}")
+        return None
+    low, high = written
+    numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in written)
+    if not numbers or not 0 <= low < high:
+        message = f"must be [low, high] with 0 <= low < high, not {written}"
+        reader.report(line, "calibration.band_hz", message)
+        return None
+    return float(low), float(high)
+
+
+def _sources(reader: _Reader) -> dict[str, SourcePosition]:
+    table = dict(REACH_SOURCES)
+    given = reader.document.get("sources")
+    if given is None:
+        return table
+    line = reader.document.line_of("sources")
+    if not isinstance(given, LineDict):
+        reader.report(line, "sources", "must map source names to switch positions")
+        return table
+    for name, where in given.items():
+        if where is None:  # a source this site does not have
+            table.pop(str(name), None)
+            continue
+        position = _position(reader, str(name), where, given.line_of(name))
+        if position is not None:
+            table[str(name)] = position
+    seen: dict[SourcePosition, str] = {}
+    for name, position in table.items():
+        if position in seen:
+            reader.report(
+                given.line_of(name) if name in given else line,
+                f"sources.{name}",
+                f"sources '{seen[position]}' and '{name}' sit at the same position",
+            )
+        seen[position] = name
+    return table
+
+
+def _position(reader: _Reader, name: str, where: object, line: int) -> SourcePosition | None:
+    """``{ms1: 7, ms3: 2}``: an MS1 position and at most one termination switch."""
+    key = f"sources.{name}"
+    if not isinstance(where, dict) or "ms1" not in where or set(where) - {"ms1", "ms3", "ms4"}:
+        reader.report(line, key, "must be {ms1: <1-8>} plus at most one of ms3/ms4")
+        return None
+    terminations = [k for k in ("ms3", "ms4") if k in where]
+    values = {k: where[k] for k in ("ms1", *terminations)}
+    for switch, value in values.items():
+        top = SWITCH_POSITIONS[switch]
+        if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= top:
+            reader.report(line, f"{key}.{switch}", f"must be an integer 1-{top}, not {value!r}")
+            return None
+    if len(terminations) > 1:
+        reader.report(line, key, "names both ms3 and ms4; a source sits behind one of them")
+        return None
+    termination = (terminations[0], values[terminations[0]]) if terminations else None
+    return SourcePosition(values["ms1"], termination)
+
+
+def _thermocouples(reader: _Reader) -> dict[str, int]:
+    ports = dict(SOURCE_THERMOCOUPLE)
+    given = reader.document.get("thermocouples")
+    if given is None:
+        return ports
+    if not isinstance(given, LineDict):
+        reader.report(
+            reader.document.line_of("thermocouples"),
+            "thermocouples",
+            "must map source names to TC-08 ports 1-8",
+        )
+        return ports
+    for name, port in given.items():
+        if not isinstance(port, int) or isinstance(port, bool) or not 1 <= port <= 8:
+            reader.report(
+                given.line_of(name),
+                f"thermocouples.{name}",
+                f"must be a TC-08 port 1-8, not {port!r}",
+            )
+        else:
+            ports[str(name)] = port
+    return ports
+
+
+def _position_yaml(position: SourcePosition) -> dict[str, int]:
+    out = {"ms1": position.ms1}
+    if position.termination is not None:
+        out[position.termination[0]] = position.termination[1]
+    return out
+
+
+def load_site(path: str | Path) -> SiteConfig:
+    """Read and check a site file.
+
+    Raises
+    ------
+    SiteError
+        Every mistake, ``file:line: key: message``; also an unreadable file.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
+        raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
+    document, problems = load_yaml(text, str(path))
+    if problems:
+        raise SiteError(problems)
+    return parse_site(document, str(path))
+
+
+def find_site(given: Path | None, environ: Mapping[str, str] = os.environ) -> Path:
+    """The site file to use: ``given``, else ``$REACH_SITE``, else ``/etc/reach/site.yaml``.
+
+    Raises
+    ------
+    ConfigError
+        When the chosen file does not exist, naming where it was looked for.
+    """
+    if given is not None:
+        return Path(given)
+    if environ.get(SITE_ENVIRONMENT):
+        return Path(environ[SITE_ENVIRONMENT])
+    if SYSTEM_SITE.is_file():
+        return SYSTEM_SITE
+    raise ConfigError(
+        f"no site file: give --site <file>, set ${SITE_ENVIRONMENT}, or install {SYSTEM_SITE}"
+    )
+
+
+def replace_devices(site: SiteConfig, **changes: Any) -> SiteConfig:
+    """A copy of ``site`` with some devices' settings changed (``spectrometer={...}``)."""
+    devices = site.devices
+    for name, values in changes.items():
+        devices = dataclasses.replace(
+            devices, **{name: dataclasses.replace(getattr(devices, name), **values)}
+        )
+    return dataclasses.replace(site, devices=devices)
+
+
+__all__ = [
+    "DEFAULT_BAND_HZ",
+    "SiteConfig",
+    "SiteError",
+    "find_site",
+    "load_site",
+    "parse_site",
+    "replace_devices",
+]

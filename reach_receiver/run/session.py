@@ -1,0 +1,303 @@
+"""One run of a schedule: compile -> instruments -> store -> runner -> close.
+
+A :class:`RunSession` is what ``reach-run`` and the daemon both stand on. Made from a
+schedule file and a site (:meth:`RunSession.prepare`), it has already compiled and
+checked the schedule, so a mistake (``file:line: key: message``) is raised before any
+device is contacted. :meth:`RunSession.run` then opens the run directory (a durable
+store and ``run.log``), builds the instruments from the site and executes the steps
+with each kind's executor, reporting progress. :meth:`RunSession.stop`, callable from a
+signal handler or another thread, asks for a cooperative stop: the runner checks it
+between steps and every wait or integration checks it while it runs.
+
+However a run ends (completed, a device fault, a failed check, a stop, an unexpected
+error) the front-end is put in its safe state, the temperature log is stored, the run
+file is merged with its status and reason, and the instruments are closed. A run that
+did not complete raises :class:`RunFailed` naming the step and its line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from reach_receiver.clock import Clock
+from reach_receiver.config.site import SiteConfig
+from reach_receiver.errors import ReceiverError
+from reach_receiver.schedule.compile import compile_schedule
+from reach_receiver.schedule.kinds import KindRegistry
+from reach_receiver.schedule.lst import apparent_lst_h
+from reach_receiver.schedule.steps import Schedule, Step
+from reach_receiver.schedule.timing import TimelineEntry, timeline
+from reach_receiver.store.parts import FILE_MODE
+from reach_receiver.store.run_store import RunStore, software_versions
+
+from .context import CheckRecord, NoProgress, Progress, RunContext, RunInterrupted, StopToken
+from .instruments import Instruments
+from .kind import RunnableKind
+from .steps import STANDARD_KINDS
+from .steps.calibrate import CalibrationOutcome
+
+log = logging.getLogger(__name__)
+
+#: The log file each run directory gets.
+RUN_LOG = "run.log"
+LOG_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+
+
+class RunFailed(ReceiverError):
+    """A run stopped before its end; the front-end was put in its safe state."""
+
+    def __init__(self, message: str, run_file: Path | None, status: str) -> None:
+        self.run_file = run_file
+        self.status = status
+        super().__init__(message)
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a completed run did: its file, checks, calibration and (clock) duration."""
+
+    directory: Path
+    run_file: Path | None
+    checks: tuple[CheckRecord, ...]
+    calibration: CalibrationOutcome | None
+    elapsed_s: float
+
+
+def plan(
+    schedule: Schedule, site: SiteConfig, start_utc: datetime | None = None
+) -> list[TimelineEntry]:
+    """The dry-run timeline of ``schedule`` at ``site`` (its longitude, its spectrometer)."""
+    return timeline(
+        schedule,
+        start_utc=start_utc or datetime.now(timezone.utc),
+        longitude_deg=site.longitude_deg,
+        spectrum_period_s=site.devices.spectrometer.period_s,
+    )
+
+
+def _unique_directory(parent: Path, name: str, now_utc: datetime) -> Path:
+    stamp = now_utc.strftime("%Y%m%dT%H%M%SZ")
+    directory = parent / f"{stamp}-{name}"
+    suffix = 1
+    while directory.exists():  # two runs started within one second
+        suffix += 1
+        directory = parent / f"{stamp}-{name}-{suffix}"
+    return directory
+
+
+@dataclass
+class RunSession:
+    """A compiled schedule, the site it runs at, and how to run it.
+
+    Parameters
+    ----------
+    schedule
+        The compiled schedule (:meth:`prepare` compiles one from a file).
+    site
+        The site: instruments, front-end tables, spectrometer period, band.
+    clock
+        The run's clock (the wall clock on site; a compressed one in dry runs).
+    out
+        The directory under which the run's own directory is made.
+    progress
+        Where progress goes.
+    metadata
+        Anything else the run file should carry (JSON-serialisable).
+    """
+
+    schedule: Schedule
+    site: SiteConfig
+    clock: Clock
+    out: Path
+    progress: Progress = field(default_factory=NoProgress)
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+    token: StopToken = field(default_factory=StopToken)
+    directory: Path | None = None
+
+    @classmethod
+    def prepare(
+        cls,
+        path: Path,
+        site: SiteConfig,
+        clock: Clock,
+        out: Path,
+        *,
+        kinds: KindRegistry = STANDARD_KINDS,
+        **options: Any,
+    ) -> RunSession:
+        """Compile ``path`` for ``site`` (raising :class:`ScheduleError` on any mistake)."""
+        schedule = compile_schedule(path, kinds=kinds, site=site)
+        # The first sidereal time costs a second (astropy loads its tables): pay it here,
+        # before any instrument (or simulator) runs, not in the middle of a measurement.
+        apparent_lst_h([clock.now()], site.longitude_deg)
+        return cls(schedule, site, clock, out, **options)
+
+    @property
+    def kinds(self) -> KindRegistry:
+        """The kinds the schedule was compiled with."""
+        if self.schedule.kinds is None:
+            raise ValueError("the schedule was compiled without its kinds")
+        return self.schedule.kinds
+
+    def timeline(self, start_utc: datetime | None = None) -> list[TimelineEntry]:
+        """The schedule's dry-run timeline at this site."""
+        return plan(self.schedule, self.site, start_utc)
+
+    def stop(self, reason: str) -> None:
+        """Ask the run to stop cooperatively (safe from signal handlers and other threads)."""
+        self.token.request(reason)
+
+    # ----------------------------------------------------------------- running
+    def run(self) -> RunSummary:
+        """Run every step; on any fault or stop go safe, close the run file, raise RunFailed."""
+        not_runnable = [k.name for k in self.kinds if not isinstance(k, RunnableKind)]
+        if not_runnable:
+            raise ValueError(f"step kinds without an executor: {', '.join(not_runnable)}")
+        entries = [e for e in self.timeline() if e.depth == 0]
+        total_s = max((e.start_s + e.duration_s for e in entries), default=0.0)
+        now = datetime.fromtimestamp(self.clock.now(), tz=timezone.utc)
+        self.directory = _unique_directory(self.out, self.schedule.name, now)
+        store = RunStore(
+            self.directory,
+            name=self.schedule.name,
+            schedule_files=self.schedule.files,
+            site_yaml=self.site.to_yaml(),
+            metadata={
+                **self.metadata,
+                "started_utc": now.strftime("%Y%m%dT%H%M%SZ"),
+                "reach_receiver": software_versions()["reach-receiver"],
+            },
+            channel_width_hz=self.site.devices.spectrometer.channel_width_hz,
+            band_hz=self.site.band_hz,
+        )
+        store.open()
+        self.progress.started(self.directory)
+        with _run_log(self.directory / RUN_LOG):
+            log.info("run %s in %s", self.schedule.name, self.directory)
+            lst = apparent_lst_h([self.clock.now()], self.site.longitude_deg)[0]
+            log.info("local sidereal time at the start: %.4f h", lst)
+            context = RunContext(
+                site=self.site,
+                instruments=Instruments.from_site(self.site, self.clock),
+                store=store,
+                clock=self.clock,
+                kinds=self.kinds,
+                stop=self.token,
+                progress=self.progress,
+            )
+            context.run_steps = lambda steps: self._run_steps(context, steps)
+            return self._run(context, entries, total_s)
+
+    def _run(
+        self, run: RunContext, entries: Sequence[TimelineEntry], total_s: float
+    ) -> RunSummary:
+        start = self.clock.now()
+        current: Step | None = None
+        try:
+            steps = self.schedule.steps
+            for index, step in enumerate(steps):
+                current = step
+                self.token.check()
+                left = total_s - entries[index].start_s if index < len(entries) else None
+                text = entries[index].description if index < len(entries) else ""
+                self.progress.step(index + 1, len(steps), step, text, left)
+                self._execute(run, step)
+            run.stop_temperatures()
+            run_file: Path | None = run.store.finish("completed")
+        except BaseException as err:
+            status, reason = _ending(err, current)
+            run_file = _fail_safe(run, status, reason, err)
+            if isinstance(err, Exception | KeyboardInterrupt):
+                raise RunFailed(reason, run_file, status) from err
+            raise  # SystemExit and the like: the run is closed, let it go on
+        finally:
+            run.stop_temperatures()
+            run.instruments.close()
+        outcome = run.results.get("calibration")
+        return RunSummary(
+            self.directory or run.store.directory,
+            run_file,
+            tuple(run.checks),
+            outcome if isinstance(outcome, CalibrationOutcome) else None,
+            self.clock.now() - start,
+        )
+
+    def _run_steps(self, run: RunContext, steps: Sequence[Step]) -> None:
+        for step in steps:
+            self.token.check()
+            self._execute(run, step)
+
+    def _execute(self, run: RunContext, step: Step) -> None:
+        log.info("%s: %s", step.where, self.kinds.written(step))
+        kind = self.kinds.of(step)
+        if not isinstance(kind, RunnableKind):  # checked before the run started
+            raise TypeError(f"step kind {kind.name} has no executor")
+        kind.execute(step, run)
+
+
+def _ending(err: BaseException, current: Step | None) -> tuple[str, str]:
+    """The status and the reason a run ended with ``err`` at step ``current``."""
+    where = f" at {current.where}" if current is not None else ""
+    if isinstance(err, RunInterrupted | KeyboardInterrupt):
+        cause = str(err) or "Ctrl-C"
+        return "interrupted", f"interrupted{where}: {cause}"
+    if isinstance(err, ReceiverError | OSError):
+        return "failed", f"{type(err).__name__}{where}: {err}"
+    return "failed", f"internal error {type(err).__name__}{where}: {err}"
+
+
+def _fail_safe(run: RunContext, status: str, reason: str, err: BaseException) -> Path | None:
+    """Safe state first, then the record: each part tried even if another fails."""
+    if status == "failed" and not isinstance(err, ReceiverError | OSError):
+        log.error("run %s: %s", status, reason, exc_info=err)
+    else:
+        log.error("run %s: %s", status, reason)
+    try:
+        state = run.instruments.frontend.safe()
+        safe_note = "front-end in its safe state" + ("" if state.is_safe else " (reads otherwise!)")
+        pins = state.as_pins()
+    except (ReceiverError, OSError) as safe_err:
+        safe_note, pins = f"could not reach the safe state: {safe_err}", {}
+        log.critical(safe_note)
+    try:
+        run.stop_temperatures()
+    except (ReceiverError, OSError) as temp_err:
+        log.error("could not store the last temperatures: %s", temp_err)
+    try:
+        message = f"{reason}; {safe_note}"
+        if pins:
+            message += " (" + " ".join(f"{k}={v}" for k, v in pins.items()) + ")"
+        run.store.add_event(status, message, timestamp=run.clock.now())
+        return run.store.finish(status, f"{reason}; {safe_note}")
+    except (ReceiverError, OSError) as store_err:
+        log.critical("could not close the run file: %s", store_err)
+        return None
+
+
+@contextlib.contextmanager
+def _run_log(path: Path) -> Iterator[None]:
+    """Everything the receiver side logs at INFO and above, also in the run's ``run.log``."""
+    handler = logging.FileHandler(path, encoding="utf-8")
+    os.chmod(path, FILE_MODE)
+    handler.setLevel(logging.INFO)
+    handler.setFormatter(logging.Formatter(LOG_FORMAT))
+    loggers = [logging.getLogger("reach_receiver"), logging.getLogger("calibration")]
+    previous = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.addHandler(handler)
+        if lg.getEffectiveLevel() > logging.INFO:
+            lg.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, previous, strict=True):
+            lg.removeHandler(handler)
+            lg.setLevel(level)
+        handler.close()

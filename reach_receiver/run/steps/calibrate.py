@@ -1,0 +1,174 @@
+"""``calibrate``: the calibration engine inside the loop.
+
+``{f_lo_hz: 50e6, f_hi_hz: 130e6, benchmark: previous.h5, tolerance: 0.05}``. The run's
+measurements so far go to :func:`calibration.solve_radiometric` through the store's
+hand-over (:mod:`reach_receiver.store.handover`: every Dicke cycle of each source, the
+latest calibrated S11s, the calibrators' thermocouple temperatures), the same hand-over
+that ``reach-cal solve run.h5`` reads, so the two give the same solution. The band is
+the site's (``calibration.band_hz``) unless the step gives one. The solution is stored
+with the hand-over it was made from, verified against a benchmark solution if one is
+given (thesis 2.1.3: every parameter's band-averaged value within 5 %), and summarised
+by its distance to the noise floor on the validation source (the antenna when measured).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from calibration import CalibrationData, solve_radiometric
+from calibration.data import SourceData
+from calibration.errors import FileFormatError
+from calibration.hdf5_io import read_solution
+from calibration.noise_floor import noise_floor
+from calibration.solution import Solution
+from reach_receiver.config.fields import Fields
+from reach_receiver.schedule.parsing import ParseContext
+from reach_receiver.schedule.steps import Step, Where
+from reach_receiver.schedule.timing import TimingWalk
+from reach_receiver.store import HandOver, read_run_file
+from reach_receiver.store.handover import ANTENNA, RECEIVER
+
+from ..checks import compare_with_benchmark
+from ..context import CheckFailed, RunContext
+from ..kind import RunnableKind
+
+
+@dataclass(frozen=True)
+class Calibrate(Step):
+    """Solve the noise-wave parameters from the data taken so far.
+
+    With a ``benchmark`` solution file, the new solution is verified against it: every
+    parameter's band-averaged value within ``tolerance`` (thesis 2.1.3: 5 %). ``f_lo_hz``
+    and ``f_hi_hz`` default to the site's band.
+    """
+
+    benchmark: Path | None = None
+    tolerance: float = 0.05
+    f_lo_hz: float | None = None
+    f_hi_hz: float | None = None
+
+
+@dataclass(frozen=True)
+class CalibrationOutcome:
+    """A calibration made during a run, and how it fares on the validation source.
+
+    ``floor_k`` is the RMS over the band of the Cramer-Rao floor of the validation
+    source's calibrated temperature, ``predicted_k`` that of the solution's calibration
+    error (posterior).
+    """
+
+    solution: Solution
+    data: CalibrationData
+    validation: SourceData
+    handover: HandOver
+    floor_k: float
+    predicted_k: float
+
+
+def benchmark_solution(path: Path) -> Solution:
+    """A benchmark solution: a solution file (``reach-cal solve``) or an earlier run file."""
+    try:
+        return read_solution(path)
+    except FileFormatError:
+        previous = read_run_file(path).solution()
+        if previous is None:
+            raise CheckFailed(f"{path} holds no calibration solution") from None
+        return previous
+
+
+def calibrate(run: RunContext, band_hz: tuple[float, float]) -> CalibrationOutcome:
+    """Solve the run so far over ``band_hz``, store the solution with its hand-over."""
+    view = run.store.engine_view(band_hz)
+    handover = view.handover
+    if RECEIVER not in handover.s11:
+        raise CheckFailed("calibrate needs the LNA's S11: add 'lna' to an s11 step before it")
+    data = view.data
+    if data is None or len(data.sources) < 2:
+        why = "; ".join(handover.warnings)
+        raise CheckFailed(
+            "calibrate needs at least two calibrators with spectra, S11 and temperatures; "
+            f"have {list(handover.calibrators)}" + (f" ({why})" if why else "")
+        )
+    solution = solve_radiometric(data)
+    validation = view.others.get(ANTENNA) or data.sources[data.names[0]]
+    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, validation, data.channel_width_hz)
+    return CalibrationOutcome(
+        solution=solution,
+        data=data,
+        validation=validation,
+        handover=handover,
+        floor_k=noise_floor(data, validation, solution.parameters).rms,
+        predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2))),
+    )
+
+
+class CalibrateKind(RunnableKind[Calibrate]):
+    """``calibrate``."""
+
+    name = "calibrate"
+    step_type = Calibrate
+    keys = ("benchmark", "tolerance", "f_lo_hz", "f_hi_hz")
+    needs_devices = False
+
+    def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Calibrate:
+        """The band (default the site's), a benchmark solution and its tolerance."""
+        benchmark = f.text("benchmark", None)
+        low = f.number("f_lo_hz", None, low=0.0, open_low=True) if f.has("f_lo_hz") else None
+        high = f.number("f_hi_hz", None, low=0.0, open_low=True) if f.has("f_hi_hz") else None
+        band = ctx.site.band_hz if ctx.site is not None else None
+        lo = low if low is not None else (band[0] if band else None)
+        hi = high if high is not None else (band[1] if band else None)
+        if not f.failed and lo is not None and hi is not None and lo >= hi:
+            f.report("f_hi_hz", f"must be above f_lo_hz ({lo:g} Hz), not {hi:g}")
+        return Calibrate(
+            where,
+            benchmark=ctx.path(f.file, benchmark) if benchmark else None,
+            tolerance=f.fraction("tolerance", 0.05),
+            f_lo_hz=low,
+            f_hi_hz=high,
+        )
+
+    def describe(self, step: Calibrate) -> str:
+        """The band, when the step sets it."""
+        if step.f_lo_hz is None and step.f_hi_hz is None:
+            return "calibrate (the site's band)"
+        lo = "site" if step.f_lo_hz is None else f"{step.f_lo_hz / 1e6:g}"
+        hi = "site" if step.f_hi_hz is None else f"{step.f_hi_hz / 1e6:g}"
+        return f"calibrate {lo}-{hi} MHz"
+
+    def duration(self, step: Calibrate, walk: TimingWalk) -> float:
+        """10 s."""
+        return 10.0
+
+    def execute(self, step: Calibrate, run: RunContext) -> None:
+        """Solve, verify against the benchmark, store, and summarise."""
+        lo, hi = run.site.band_hz
+        band = (step.f_lo_hz or lo, step.f_hi_hz or hi)
+        run.progress.update(f"calibrating {band[0] / 1e6:g}-{band[1] / 1e6:g} MHz", 0, 1, None)
+        outcome = calibrate(run, band)
+        verification: dict[str, object] = {}
+        if step.benchmark is not None:
+            verdict = compare_with_benchmark(
+                outcome.solution,
+                benchmark_solution(step.benchmark),
+                outcome.data.freq_hz,
+                step.tolerance,
+            )
+            verification = {"passed": verdict.passed, **verdict.differences}
+            worst = max(verdict.differences, key=verdict.differences.__getitem__)
+            detail = (
+                f"largest change {worst} {100 * verdict.differences[worst]:.2f} % "
+                f"(tolerance {100 * step.tolerance:.0f} %)"
+            )
+            run.record_check("benchmark_solution", verdict.passed, detail, verification)
+        run.store.add_solution(
+            outcome.solution,
+            timestamp=run.clock.now(),
+            verification=verification,
+            handover=outcome.handover,
+        )
+        run.solution = outcome.solution
+        run.results["calibration"] = outcome

@@ -1,0 +1,106 @@
+"""``observe``: antenna Dicke cycles, periodic test-load checks, each cycle calibrated.
+
+``{cycles: 48, seconds: 200, source: ant, test_load_every: 6, rfi_threshold_sigma: 5}``:
+``cycles`` Dicke cycles of ``source`` with ``seconds`` per position; before every
+``test_load_every``-th cycle the VNA is checked on its test load (recalibrated as the
+step's ``test_load_check`` would). With a solution from an earlier ``calibrate`` step,
+each cycle is calibrated at once, through the store's hand-over with that one cycle and
+the latest S11s, over the solution's band, and its RFI channels flagged
+(:func:`~reach_receiver.run.checks.rfi_flags`); the calibrated spectrum is stored as
+``<source>_<cycle>``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from reach_receiver.config.fields import Fields
+from reach_receiver.schedule.parsing import ParseContext
+from reach_receiver.schedule.steps import Step, Where
+from reach_receiver.schedule.timing import TimingWalk, hms
+
+from ..checks import rfi_flags
+from ..context import RunContext
+from ..kind import RunnableKind
+from .spectra import dicke_connections, dicke_cycle
+from .vna import TestLoadCheck, check_test_load
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Observe(Step):
+    """Antenna Dicke cycles, a test-load check every ``test_load_every`` cycles, RFI flags."""
+
+    cycles: int
+    seconds: float
+    source: str = "ant"
+    test_load_every: int = 6
+    rfi_threshold_sigma: float = 5.0
+
+
+def calibrate_cycle(run: RunContext, source: str, number: int, name: str, threshold: float) -> None:
+    """Calibrate one stored cycle with the run's solution; store it with its RFI flags."""
+    solution = run.solution
+    if solution is None:
+        return
+    band = (solution.basis.f_lo_hz, solution.basis.f_hi_hz)
+    view = run.store.engine_view(band, cycles={source: [number]})
+    if view.layout is None or source not in view.others:
+        log.warning("observe: %s not calibrated (%s)", name, "; ".join(view.handover.warnings))
+        return
+    layout = view.layout
+    spectrum = solution.calibrate(
+        layout.freq_hz, layout.gamma_rec, view.others[source], layout.channel_width_hz
+    )
+    flags = rfi_flags(spectrum.mean, threshold)
+    run.store.add_calibrated(
+        name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now()
+    )
+    log.info("observe: %s calibrated, %d channels flagged", name, flags.sum())
+
+
+class ObserveKind(RunnableKind[Observe]):
+    """``observe``."""
+
+    name = "observe"
+    step_type = Observe
+    keys = ("cycles", "seconds", "source", "test_load_every", "rfi_threshold_sigma")
+
+    def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Observe:
+        """Cycles, seconds per position (at least one spectrum), source, checks, RFI."""
+        return Observe(
+            where,
+            cycles=f.count("cycles"),
+            seconds=ctx.integration(f, "seconds"),
+            source=f.choice("source", ctx.sources, "ant") or "ant",
+            test_load_every=f.count("test_load_every", 6),
+            rfi_threshold_sigma=f.number("rfi_threshold_sigma", 5.0, low=0.0, open_low=True),
+        )
+
+    def describe(self, step: Observe) -> str:
+        """Cycles, their length, and the checks."""
+        return (
+            f"observe {step.source}: {step.cycles} Dicke cycles, {hms(step.seconds)} per "
+            f"position, test load every {step.test_load_every}"
+        )
+
+    def duration(self, step: Observe, walk: TimingWalk) -> float:
+        """The cycles and a test-load sweep every ``test_load_every`` of them."""
+        spectra = walk.spectra(3 * step.cycles, step.seconds)
+        return spectra + walk.sweeps(step.cycles // step.test_load_every)
+
+    def connections(self, step: Observe) -> list[tuple[str, str]]:
+        """The Dicke positions, then the test load."""
+        return [*dicke_connections((step.source,)), ("test_load", "vna")]
+
+    def execute(self, step: Observe, run: RunContext) -> None:
+        """Each cycle: the test load when due, the cycle, its calibration."""
+        for index in range(step.cycles):
+            if index and step.test_load_every and index % step.test_load_every == 0:
+                check_test_load(run, TestLoadCheck(step.where))
+            label = f"cycle {index + 1}/{step.cycles}"
+            number = dicke_cycle(run, step.source, step.seconds, label)
+            name = f"{step.source}_{index:04d}"
+            calibrate_cycle(run, step.source, number, name, step.rfi_threshold_sigma)
