@@ -83,6 +83,9 @@ class Fields:
     resolve
         Substitutes ``${...}`` in values (a schedule's variables); values are taken as
         written by default.
+    line
+        Where a missing key is reported: the line of the key this mapping is written
+        under (by default the mapping's own first line).
     """
 
     def __init__(
@@ -94,8 +97,10 @@ class Fields:
         allowed: Sequence[str],
         problems: list[Problem],
         resolve: Resolver = _as_written,
+        line: int | None = None,
     ) -> None:
         self.args = args
+        self._line = args.line if line is None else line
         self.file = file
         self.key = key
         self.resolve = resolve
@@ -132,7 +137,7 @@ class Fields:
         """
         if name not in self.args:
             if default is REQUIRED:
-                self.report(name, "missing required key", self.args.line)
+                self.report(name, "missing required key", self._line)
                 return UNRESOLVED
             return default
         return self.resolve(self.args[name], self.file, self.line(name), f"{self.key}.{name}")
@@ -270,4 +275,5 @@ class Fields:
             allowed=allowed,
             problems=self.problems,
             resolve=self.resolve,
+            line=self.line(name),
         )

@@ -60,7 +60,8 @@ class RepeatKind(RunnableKind[Repeat]):
             walk.report(
                 step,
                 "repeat.period_s",
-                f"period {hms(period)} is shorter than one repetition ({hms(one)} estimated)",
+                f"period {hms(period)} is shorter than one repetition ({hms(one)} estimated"
+                f" with {walk.period_s:g} s spectra)",
             )
         every = max(period or 0.0, one)
         return (step.count - 1) * every + one
