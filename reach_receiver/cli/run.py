@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import signal
 import sys
 from collections.abc import Iterator, Sequence
@@ -43,6 +44,8 @@ from reach_receiver.sim.receiver import (
 
 from .display import PlainProgress, RichProgressDisplay
 from .logs import add_version, configure_logging
+
+log = logging.getLogger(__name__)
 
 #: Signals that stop a run cooperatively; a second one stops it at once.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -117,19 +120,23 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     if args.validate:
         return 0
     with contextlib.ExitStack() as stack:
+        # First in, last out: signals stay handled until the simulator has stopped too.
+        stack.enter_context(_stopping_on_signals(session))
         sim: SimulatedReceiver | None = None
         if args.sim:
             sim = stack.enter_context(SimulatedReceiver(settings))
             session.site, session.clock = sim.site(), sim.clock
         session.metadata = _metadata(args, session.site, sim)
         session.progress = stack.enter_context(_display(session.clock, args.quiet))
-        stack.enter_context(_stopping_on_signals(session))
         try:
             summary = session.run()
         except RunFailed as err:
             print(f"reach-run: run {err.status}: {err}", file=sys.stderr)
             if err.run_file is not None:
                 print(f"reach-run: measurements so far are in {err.run_file}", file=sys.stderr)
+            return 1
+        except (ReceiverError, OSError) as err:  # the run directory could not be made
+            print(f"reach-run: the run did not start: {err}", file=sys.stderr)
             return 1
         _print_summary(summary, sim)
     return 0
@@ -175,9 +182,12 @@ def _stopping_on_signals(session: RunSession) -> Iterator[None]:
     def on_signal(signum: int, frame: FrameType | None) -> None:
         del frame
         name = signal.Signals(signum).name
-        if session.token.requested:
+        if session.closing:  # the safe state and the run file come first
+            log.warning("%s while the run is closing: ignored", name)
+        elif session.token.requested:
             raise KeyboardInterrupt(f"second signal {name}")
-        session.stop(f"signal {name}")
+        else:
+            session.stop(f"signal {name}")
 
     previous = {s: signal.signal(s, on_signal) for s in STOP_SIGNALS}
     try:

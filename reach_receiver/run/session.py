@@ -120,6 +120,9 @@ class RunSession:
     metadata: Mapping[str, Any] = field(default_factory=dict)
     token: StopToken = field(default_factory=StopToken)
     directory: Path | None = None
+    #: Set once the run is putting the front-end safe and closing its file: nothing may
+    #: interrupt that (a second Ctrl-C is then ignored by the command line).
+    closing: bool = False
 
     @classmethod
     def prepare(
@@ -209,10 +212,12 @@ class RunSession:
                 text = entries[index].description if index < len(entries) else ""
                 self.progress.step(index + 1, len(steps), step, text, left)
                 self._execute(run, step)
+            self.closing = True
             run.stop_temperatures()
             run_file: Path | None = run.store.finish("completed")
         except BaseException as err:
-            status, reason = _ending(err, current)
+            self.closing = True
+            status, reason = _ending(err, current, self.token.reason)
             run_file = _fail_safe(run, status, reason, err)
             if isinstance(err, Exception | KeyboardInterrupt):
                 raise RunFailed(reason, run_file, status) from err
@@ -242,11 +247,17 @@ class RunSession:
         kind.execute(step, run)
 
 
-def _ending(err: BaseException, current: Step | None) -> tuple[str, str]:
-    """The status and the reason a run ended with ``err`` at step ``current``."""
+def _ending(err: BaseException, current: Step | None, requested: str) -> tuple[str, str]:
+    """The status and the reason a run ended with ``err`` at step ``current``.
+
+    ``requested`` is the reason of a stop request, which names the cause first (a second
+    signal that cut the cooperative stop short comes after it).
+    """
     where = f" at {current.where}" if current is not None else ""
     if isinstance(err, RunInterrupted | KeyboardInterrupt):
         cause = str(err) or "Ctrl-C"
+        if requested and cause != requested:
+            cause = f"{requested}, then {cause}"
         return "interrupted", f"interrupted{where}: {cause}"
     if isinstance(err, ReceiverError | OSError):
         return "failed", f"{type(err).__name__}{where}: {err}"

@@ -195,6 +195,10 @@ class FirmwareTeensy:
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
                 bufsize=0,
+                # Its own session: a hang-up or a signal to its owner's process group (a
+                # closed terminal, `timeout`) must not end the board before the owner has
+                # put the front-end in its safe state; only close() ends it.
+                start_new_session=True,
             )
         except OSError as err:
             raise ReceiverError(f"{DEVICE}: cannot start {binary}: {err}") from err
