@@ -3,7 +3,8 @@
 A :class:`RunContext` is made by the :class:`~.session.RunSession` for one run. The
 measurements themselves live only in the store (the hand-over to the engine reads them
 from there); the context holds what a run carries from step to step besides: the VNA's
-sweep settings, the temperature log, the latest solution and the checks' verdicts.
+sweep settings, the temperature log, the latest solution (and how it was made) and the
+checks' verdicts.
 
 Stopping is cooperative: :meth:`StopToken.request` (a signal handler, the daemon's
 ``abort``) sets an event that the runner checks between steps and that every wait and
@@ -20,7 +21,7 @@ import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -35,6 +36,9 @@ from reach_receiver.store.run_store import RunStore
 
 from .instruments import Instruments
 from .measure import TemperatureLogger
+
+if TYPE_CHECKING:
+    from .steps.calibrate import CalibrationOutcome
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +144,7 @@ class RunContext:
     solution: Solution | None = None
     temperatures: TemperatureLogger | None = None
     checks: list[CheckRecord] = field(default_factory=list)
-    results: dict[str, Any] = field(default_factory=dict)
+    calibration: CalibrationOutcome | None = None
     _stored_readings: int = 0
 
     # ----------------------------------------------------------------- time

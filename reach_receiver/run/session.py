@@ -225,12 +225,11 @@ class RunSession:
         finally:
             run.stop_temperatures()
             run.instruments.close()
-        outcome = run.results.get("calibration")
         return RunSummary(
             self.directory or run.store.directory,
             run_file,
             tuple(run.checks),
-            outcome if isinstance(outcome, CalibrationOutcome) else None,
+            run.calibration,
             self.clock.now() - start,
         )
 

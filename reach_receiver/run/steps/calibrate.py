@@ -171,4 +171,4 @@ class CalibrateKind(RunnableKind[Calibrate]):
             handover=outcome.handover,
         )
         run.solution = outcome.solution
-        run.results["calibration"] = outcome
+        run.calibration = outcome
