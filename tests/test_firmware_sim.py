@@ -73,14 +73,14 @@ def ask(link: serial.Serial, line: str) -> str:
 
 
 def only_state(state: dict[str, str]) -> dict[str, str]:
-    return {k: v for k, v in state.items() if k not in ("boot", "uptime_ms")}
+    return {k: v for k, v in state.items() if k not in ("boot", "uptime_ms", "changes", "deadman")}
 
 
 def test_identity_and_tagged_ping(port: serial.Serial) -> None:
     assert ask(port, "#a1 ping") == "OK 00 #a1 pong"
     assert ask(port, "id") == "OK 00 REACH front-end teensy35"
-    assert ask(port, "version") == "OK 00 firmware=1.0.0 protocol=1"
-    commands = "help id version ping state select rail temps tec safe"
+    assert ask(port, "version") == "OK 00 firmware=2.0.0 protocol=2"
+    commands = "help id version ping state select rail temps tec safe deadman"
     assert ask(port, "#zz help") == f"OK 00 #zz {commands}"
 
 
@@ -159,6 +159,22 @@ def test_hang_is_recovered_by_the_watchdog(sim: FirmwareTeensy, port: serial.Ser
     assert port.read(port.in_waiting) == b""  # the request sent while hung was lost
     assert ask(port, "#h2 ping") == "OK 00 #h2 pong"
     assert "boot=wdog" in ask(port, "state")
+
+
+def test_deadman_trips_in_real_time_and_reports_once(
+    sim: FirmwareTeensy, port: serial.Serial
+) -> None:
+    for line in ("rail 24v on", "rail fan on", "rail 12v on", "select ms1 4"):
+        assert ask(port, line).startswith("OK 00")
+    assert ask(port, "#d deadman 200") == "OK 00 #d deadman=200"
+    assert parse_pins(ask(port, "state").removeprefix("OK 00 "))["changes"] == "4"
+    # The simulator goes safe on its own (a PINS line), with nobody asking.
+    state = sim.wait_for_state(lambda s: s.get("12v") == "0", 10 * 0.2)
+    assert only_state(state) == {**POWER_ON, "24v": "1", "fan": "1"}
+    assert (state["changes"], state["deadman"]) == ("6", "0")
+    expected = "dead-man tripped after 200 ms without the host; front-end safe"
+    assert ask(port, "#x1 rail 6v on") == f"ERR 50 #x1 {expected}"
+    assert ask(port, "#x2 rail 6v on") == "OK 00 #x2 6v=1"
 
 
 def test_port_can_be_reopened(sim: FirmwareTeensy) -> None:

@@ -29,6 +29,18 @@ bool parse_hex(const Token& word, uint8_t* out, size_t capacity, size_t* size) {
   return true;
 }
 
+// A decimal count of milliseconds: 1-7 digits, no leading zero (one spelling per value).
+bool parse_ms(const Token& word, uint32_t* ms) {
+  if (word.size < 1 || word.size > 7 || (word.size > 1 && word.text[0] == '0')) return false;
+  uint32_t value = 0;
+  for (size_t i = 0; i < word.size; ++i) {
+    if (word.text[i] < '0' || word.text[i] > '9') return false;
+    value = value * 10 + static_cast<uint32_t>(word.text[i] - '0');
+  }
+  *ms = value;
+  return true;
+}
+
 enum class TagKind : uint8_t { None, Good, Bad };
 
 // A line may open with `#<tag> `: 1-8 letters or digits. `rest` is where the command
@@ -86,6 +98,7 @@ const Firmware::Command Firmware::kCommands[] = {
     {"state", 0, 0, &Firmware::cmd_state},   {"select", 2, 2, &Firmware::cmd_select},
     {"rail", 1, 2, &Firmware::cmd_rail},     {"temps", 0, 0, &Firmware::cmd_temps},
     {"tec", 2, 2, &Firmware::cmd_tec},       {"safe", 0, 0, &Firmware::cmd_safe},
+    {"deadman", 0, 1, &Firmware::cmd_deadman},
 };
 const size_t Firmware::kCommandCount = sizeof(kCommands) / sizeof(kCommands[0]);
 
@@ -94,13 +107,26 @@ void Firmware::begin() {
   frontend_.power_on();
   boot_ = hal_.boot_reason();
   boot_ms_ = hal_.millis();
+  deadman_ms_ = 0;
+  deadman_renewed_ms_ = boot_ms_;
+  tripped_after_ms_ = 0;
 }
 
 void Firmware::feed(uint8_t byte) {
   if (line_.push(byte)) answer_line();
 }
 
+void Firmware::poll() {
+  if (deadman_ms_ == 0 || hal_.millis() - deadman_renewed_ms_ < deadman_ms_) return;
+  frontend_.safe();
+  tripped_after_ms_ = deadman_ms_;
+  deadman_ms_ = 0;
+}
+
 void Firmware::answer_line() {
+  // A request that arrives after the timeout ran out (before the main loop noticed) finds
+  // the front-end already safe, exactly as one that arrives later.
+  poll();
   Reply reply;
   Token tag{nullptr, 0};
   size_t rest = 0;
@@ -116,8 +142,16 @@ void Firmware::answer_line() {
     size_t count = split_words(line_.data() + rest, line_.size() - rest, words, kMaxWords);
     if (count == 0) {
       reply.fail(6, "empty line");
+    } else if (tripped_after_ms_ != 0) {
+      // Told once, to the first request after the trip, which is not run: the host
+      // must learn that the front-end moved on its own before it moves anything.
+      reply.fail(kTrippedCode, "dead-man tripped after ");
+      reply.text.append_uint(tripped_after_ms_);
+      reply.text.append(" ms without the host; front-end safe");
+      tripped_after_ms_ = 0;
     } else {
       run(words, count, &reply);
+      deadman_renewed_ms_ = hal_.millis();
     }
   }
   send(reply, kind == TagKind::Good ? &tag : nullptr);
@@ -175,6 +209,10 @@ void Firmware::state_payload(Payload* out) {
   out->append(boot_ == BootReason::Watchdog ? "boot=wdog" : "boot=por");
   out->append(" uptime_ms=");
   out->append_uint(hal_.millis() - boot_ms_);
+  out->append(" changes=");
+  out->append_uint(frontend_.changes());
+  out->append(" deadman=");
+  out->append_uint(deadman_ms_);
 }
 
 void Firmware::cmd_help(const Token*, size_t, Reply* reply) {
@@ -297,6 +335,19 @@ void Firmware::tec_query(const uint8_t* request, size_t size, Reply* reply) {
 void Firmware::cmd_safe(const Token*, size_t, Reply* reply) {
   frontend_.safe();
   state_payload(&reply->text);
+}
+
+void Firmware::cmd_deadman(const Token* args, size_t count, Reply* reply) {
+  if (count == 1) {
+    uint32_t ms = 0;
+    bool valid = parse_ms(args[0], &ms);
+    if (!valid || (ms != 0 && (ms < kDeadmanMinMs || ms > kDeadmanMaxMs))) {
+      return reply->fail(5, "timeout must be 0 (off) or 100-3600000 ms");
+    }
+    deadman_ms_ = ms;  // answer_line renews the timer after this
+  }
+  reply->text.append("deadman=");
+  reply->text.append_uint(deadman_ms_);
 }
 
 }  // namespace reach

@@ -94,6 +94,7 @@ const char* position_name(SwitchId id, uint8_t position) {
 void Frontend::power_on() {
   for (uint8_t i = 0; i < pins::kOutputPinCount; ++i) hal_.pin_write(pins::kOutputPins[i], false);
   state_ = FrontendState{};
+  changes_ = 0;
 }
 
 bool Frontend::check_select(SwitchId id, uint8_t position, Refusal* why) const {
@@ -116,6 +117,7 @@ void Frontend::select(SwitchId id, uint8_t position) {
   state_.position[ix(id)] = 0;
   if (position != 0) hal_.pin_write(sw.pins[position - 1], true);
   state_.position[ix(id)] = position;
+  ++changes_;
 }
 
 bool Frontend::check_rail(RailId id, bool on, Refusal* why) const {
@@ -148,6 +150,7 @@ void Frontend::set_rail(RailId id, bool on) {
   if (state_.rail_on[ix(id)] == on) return;
   hal_.pin_write(rail_def(id).pin, on);
   state_.rail_on[ix(id)] = on;
+  ++changes_;
 }
 
 void Frontend::safe() {

@@ -75,10 +75,13 @@ class Frontend {
   void safe();
 
   const FrontendState& state() const { return state_; }
+  // Output changes since power_on(): one per switch or rail that actually moved.
+  uint32_t changes() const { return changes_; }
 
  private:
   Hal& hal_;
   FrontendState state_{};
+  uint32_t changes_ = 0;
 };
 
 }  // namespace reach

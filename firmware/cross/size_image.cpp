@@ -31,6 +31,7 @@ int main() {
   const char line[] = "#1 state\n";
   for (;;) {
     for (char c : line) firmware.feed(static_cast<uint8_t>(c));
+    firmware.poll();
     hal.watchdog_kick();
   }
 }

@@ -3,7 +3,8 @@
 //   teensy-sim [--uart1 PATH] [--watchdog-ms N]
 //
 // stdout: "PTY <slave path>" once, then "PINS <state payload>" at start and after every
-//         line that changed an output (and after a watchdog reset).
+//         line that changed an output (and after a watchdog reset or a dead-man trip).
+// The dead-man switch runs on the host's monotonic clock, checked at least every 20 ms.
 // stdin:  "I2C <addr> <celsius>|fail|absent" sets a simulated MCP9808;
 //         "HANG" stops the main loop, so the simulated watchdog resets the core after
 //         N ms (default 1000): power-on state, boot=wdog. EOF on stdin ends the program.
@@ -208,6 +209,11 @@ int main(int argc, char** argv) {
         if (read(uart1, buf, sizeof buf) <= 0) uart1_alive = false;
       } else if (fds[2].revents & (POLLHUP | POLLERR)) {
         uart1_alive = false;
+      }
+      fw.poll();  // the dead-man switch, as the board's loop() does
+      if (hal.write_count() != pins_reported) {
+        print_pins(fw);
+        pins_reported = hal.write_count();
       }
       hal.watchdog_kick();
     }

@@ -54,6 +54,30 @@ inline bool interlocks_hold(const FrontendState& state) {
          state.rail_on[static_cast<size_t>(RailId::V24)];
 }
 
+// Outputs (switch positions and rails) that differ between two states.
+inline uint32_t outputs_differing(const FrontendState& a, const FrontendState& b) {
+  uint32_t n = 0;
+  for (size_t i = 0; i < reach::kSwitchCount; ++i) n += a.position[i] != b.position[i] ? 1 : 0;
+  for (size_t i = 0; i < reach::kRailCount; ++i) n += a.rail_on[i] != b.rail_on[i] ? 1 : 0;
+  return n;
+}
+
+// `after` is what `safe` makes of `before`: every switch at 0 (MTS lna), ns, 6v and 12v
+// off, 24v, fan and tec as they were.
+inline bool safe_from(const FrontendState& before, const FrontendState& after) {
+  for (size_t i = 0; i < reach::kSwitchCount; ++i) {
+    if (after.position[i] != 0) return false;
+  }
+  for (RailId off : {RailId::Ns, RailId::V6, RailId::V12}) {
+    if (after.rail_on[static_cast<size_t>(off)]) return false;
+  }
+  for (RailId kept : {RailId::V24, RailId::Fan, RailId::Tec}) {
+    size_t i = static_cast<size_t>(kept);
+    if (after.rail_on[i] != before.rail_on[i]) return false;
+  }
+  return true;
+}
+
 inline bool is_output_pin(uint8_t pin) {
   for (uint8_t i = 0; i < reach::pins::kOutputPinCount; ++i) {
     if (reach::pins::kOutputPins[i] == pin) return true;

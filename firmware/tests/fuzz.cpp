@@ -2,7 +2,11 @@
 //
 // For every LF-ended line: exactly one reply, well formed; an ERR reply leaves the state
 // and every pin untouched; after every line the pins match the state, the interlocks
-// hold, and (checked on each single pin write) no switch ever has two lines high.
+// hold, and (checked on each single pin write) no switch ever has two lines high. The
+// `changes` counter grows by exactly the outputs that moved (so it never decreases
+// between resets). The main loop's poll() runs before every byte, with time jumping now
+// and then past the dead-man's timeout: a trip happens only while armed, gives the safe
+// state and disarms, and ERR 50 answers exactly the first request after it.
 // Usage: fuzz [inputs] [seed]
 #include <cctype>
 #include <cstdint>
@@ -38,6 +42,7 @@ const char* const kValid[] = {
     "rail ns on", "rail ns off", "rail fan on", "rail fan off", "rail tec on", "rail tec off",
     "rail 12v", "rail 3v3 on", "rail 5v off",
     "tec send 016A3030", "tec query 016A303043", "tec send 00",
+    "deadman", "deadman 0", "deadman 100", "deadman 250", "deadman 3600000", "deadman 99",
 };
 constexpr size_t kValidCount = sizeof(kValid) / sizeof(kValid[0]);
 
@@ -135,7 +140,7 @@ int main(int argc, char** argv) {
     }
   };
 
-  long lines = 0, errors = 0, failures = 0;
+  long lines = 0, errors = 0, failures = 0, trips = 0, told = 0, resets = 0;
   std::set<std::string> states;  // distinct output states reached, a coverage figure
   auto fail = [&](const char* what, const std::string& input, const std::string& reply) {
     if (++failures <= 10) {
@@ -143,16 +148,47 @@ int main(int argc, char** argv) {
                   harness::visible(reply).c_str());
     }
   };
+  // The main loop between two bytes: poll() may trip the dead-man, and nothing else.
+  auto poll = [&](const std::string& line) {
+    reach::FrontendState before = b.fw.state();
+    uint32_t changes = b.fw.changes();
+    bool armed = b.fw.deadman_ms() != 0;
+    bool pending = b.fw.deadman_tripped();
+    b.fw.poll();
+    if (b.fw.deadman_tripped() == pending) {
+      if (b.fw.state() != before || b.fw.changes() != changes) fail("poll moved outputs", line, "");
+      return;
+    }
+    ++trips;
+    if (!armed || b.fw.deadman_ms() != 0) fail("trip while disarmed, or stayed armed", line, "");
+    if (!bench::safe_from(before, b.fw.state())) fail("trip did not give the safe state", line, "");
+    if (b.fw.changes() - changes != bench::outputs_differing(before, b.fw.state())) {
+      fail("changes miscounted by the trip", line, "");
+    }
+    if (!bench::pins_match_state(b.hal, b.fw.state())) fail("pins differ after trip", line, "");
+  };
+
   for (long n = 0; n < inputs; ++n) {
     if (rng.chance(1)) b.hal.set_sensor_fail(0x1a);
     if (rng.chance(1)) b.hal.set_sensor_absent(0x1a);
-    b.hal.advance(rng.below(50));
+    b.hal.advance(rng.below(200) == 0 ? 100 + rng.below(400) : rng.below(50));
+    if (rng.below(1000) == 0) {  // a watchdog reset between two inputs
+      ++resets;
+      b.hal.set_boot_reason(reach::BootReason::Watchdog);
+      b.fw.begin();
+      if (b.fw.changes() != 0 || b.fw.deadman_ms() != 0 || b.fw.deadman_tripped()) {
+        fail("reset left changes, dead-man or trip report", "", "");
+      }
+    }
     std::string input = generate(rng);
-    reach::FrontendState before = b.fw.state();
-    uint64_t writes_before = b.hal.write_count();
     std::string line;
     for (char c : input) {
       line += c;
+      poll(line);
+      reach::FrontendState before = b.fw.state();
+      uint64_t writes_before = b.hal.write_count();
+      uint32_t changes_before = b.fw.changes();
+      bool pending = b.fw.deadman_tripped();
       b.fw.feed(static_cast<uint8_t>(c));
       if (c != '\n') continue;
       ++lines;
@@ -166,11 +202,18 @@ int main(int argc, char** argv) {
           fail("rejected line changed the state", line, reply);
         }
       }
+      bool told_now = reply.compare(0, 6, "ERR 50") == 0;
+      told += told_now ? 1 : 0;
+      if (told_now != (pending && !b.fw.deadman_tripped())) {
+        fail("ERR 50 not exactly the first request after a trip", line, reply);
+      }
+      if (b.fw.changes() - changes_before != bench::outputs_differing(before, b.fw.state())) {
+        fail("changes miscounted", line, reply);
+      }
       if (!bench::pins_match_state(b.hal, b.fw.state())) fail("pins differ from state", line, reply);
       if (!bench::interlocks_hold(b.fw.state())) fail("interlock broken", line, reply);
-      before = b.fw.state();
-      states.insert(std::string(reinterpret_cast<const char*>(&before), sizeof before));
-      writes_before = b.hal.write_count();
+      reach::FrontendState after = b.fw.state();
+      states.insert(std::string(reinterpret_cast<const char*>(&after), sizeof after));
       line.clear();
     }
     if (b.hal.writes().size() > 4096) b.hal.clear_writes();
@@ -180,8 +223,9 @@ int main(int argc, char** argv) {
     std::printf("FAIL %d pin writes broke exclusivity or left the pin table\n", b.violations);
   }
   if (b.hal.take_output().size() != 0) ++failures;
-  std::printf("fuzz: %ld inputs, %ld lines (%ld refused), %zu distinct states, seed 0x%llx, "
-              "%ld failures\n",
-              inputs, lines, errors, states.size(), static_cast<unsigned long long>(seed), failures);
+  std::printf("fuzz: %ld inputs, %ld lines (%ld refused), %zu distinct states, %ld dead-man "
+              "trips (%ld told), %ld resets, seed 0x%llx, %ld failures\n",
+              inputs, lines, errors, states.size(), trips, told, resets,
+              static_cast<unsigned long long>(seed), failures);
   return failures == 0 && lines >= inputs ? 0 : 1;
 }

@@ -16,9 +16,9 @@ const std::string kPowerOnState =
 
 TEST(help_id_version) {
   Bench b;
-  CHECK_EQ(b.cmd("help"), std::string("OK 00 help id version ping state select rail temps tec safe\r\n"));
+  CHECK_EQ(b.cmd("help"), std::string("OK 00 help id version ping state select rail temps tec safe deadman\r\n"));
   CHECK_EQ(b.cmd("id"), std::string("OK 00 REACH front-end teensy35\r\n"));
-  CHECK_EQ(b.cmd("version"), std::string("OK 00 firmware=1.0.0 protocol=1\r\n"));
+  CHECK_EQ(b.cmd("version"), std::string("OK 00 firmware=2.0.0 protocol=2\r\n"));
 }
 
 TEST(power_on_drives_every_output_pin_low_once) {
@@ -35,7 +35,7 @@ TEST(power_on_drives_every_output_pin_low_once) {
 TEST(power_on_state_and_uptime) {
   Bench b;
   b.hal.advance(1234);
-  CHECK_EQ(b.cmd("state"), "OK 00 " + kPowerOnState + " uptime_ms=1234\r\n");
+  CHECK_EQ(b.cmd("state"), "OK 00 " + kPowerOnState + " uptime_ms=1234 changes=0 deadman=0\r\n");
 }
 
 TEST(pin_table_is_consistent) {
@@ -177,7 +177,7 @@ TEST(state_reports_everything) {
   b.hal.advance(42);
   CHECK_EQ(b.cmd("state"),
            std::string("OK 00 ms1=7 ms2=5 ms3=2 ms4=4 mts=vna 6v=0 12v=1 24v=1 ns=0 fan=1 "
-                       "tec=0 boot=por uptime_ms=42\r\n"));
+                       "tec=0 boot=por uptime_ms=42 changes=8 deadman=0\r\n"));
 }
 
 TEST(safe_order_and_result) {
@@ -189,7 +189,7 @@ TEST(safe_order_and_result) {
   b.hal.clear_writes();
   CHECK_EQ(b.cmd("#s safe"),
            std::string("OK 00 #s ms1=0 ms2=0 ms3=0 ms4=0 mts=lna 6v=0 12v=0 24v=1 ns=0 fan=1 "
-                       "tec=1 boot=por uptime_ms=0\r\n"));
+                       "tec=1 boot=por uptime_ms=0 changes=19 deadman=0\r\n"));
   // Noise source first, then the switches in order, the MTS, the LNA rail, then 12v.
   const uint8_t order[] = {reach::pins::kRailNs, reach::pins::kMs1[1], reach::pins::kMs2[2],
                            reach::pins::kMs3[3], reach::pins::kMs4[0], reach::pins::kMts,
@@ -207,7 +207,7 @@ TEST(safe_order_and_result) {
 
 TEST(safe_from_power_on_changes_nothing) {
   Bench b;
-  CHECK_EQ(b.cmd("safe"), "OK 00 " + kPowerOnState + " uptime_ms=0\r\n");
+  CHECK_EQ(b.cmd("safe"), "OK 00 " + kPowerOnState + " uptime_ms=0 changes=0 deadman=0\r\n");
   CHECK(b.hal.writes().empty());
 }
 
@@ -229,7 +229,7 @@ TEST(watchdog_reset_gives_power_on_state_with_boot_wdog) {
   b.hal.advance(7);
   CHECK_EQ(b.cmd("state"),
            std::string("OK 00 ms1=0 ms2=0 ms3=0 ms4=0 mts=lna 6v=0 12v=0 24v=0 ns=0 fan=0 "
-                       "tec=0 boot=wdog uptime_ms=7\r\n"));
+                       "tec=0 boot=wdog uptime_ms=7 changes=0 deadman=0\r\n"));
 }
 
 TEST(temps_reads_every_sensor_present) {

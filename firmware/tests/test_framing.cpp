@@ -146,7 +146,8 @@ TEST(wrong_argument_counts_are_refused) {
   const char* lines[] = {"ping x",        "help me",         "state now",      "safe please",
                          "select ms1",    "select ms1 1 2",  "rail",           "rail 6v on now",
                          "tec send",      "tec",             "temps 0x18",     "id x",
-                         "version 1",     "select",          "tec send 00 01", "select a b c d e f g h i"};
+                         "version 1",     "select",          "tec send 00 01", "select a b c d e f g h i",
+                         "deadman 100 ms"};
   for (const char* line : lines) {
     Bench b;
     CHECK_EQ(b.cmd(line), std::string("ERR 04 wrong number of arguments\r\n"));

@@ -44,10 +44,16 @@ _TIMEOUT = _range(0.0, 600.0, open_low=True)
 
 @dataclass(frozen=True)
 class TeensySettings:
-    """The front-end microcontroller: its USB serial port."""
+    """The front-end microcontroller: its USB serial port, and its dead-man switch.
+
+    ``deadman_s``: after this long without the host, the firmware puts the front-end in
+    its safe state on its own (0 = off; otherwise at least 0.1 s); the driver renews it
+    every third of it while connected.
+    """
 
     port: str
     timeout_s: float = field(default=1.0, metadata=_TIMEOUT)
+    deadman_s: float = field(default=60.0, metadata=_range(0.0, 3600.0))
 
 
 @dataclass(frozen=True)

@@ -35,17 +35,22 @@ class FrontEndState:
     """The board's outputs as ``state`` reports them.
 
     ``switches`` maps ``ms1``-``ms4`` to positions (0 = released) and ``mts`` to
-    ``"lna"`` or ``"vna"``; ``rails`` maps each switchable rail to on/off.
+    ``"lna"`` or ``"vna"``; ``rails`` maps each switchable rail to on/off. ``boot`` is
+    ``por`` or ``wdog``, ``uptime_ms`` the time since that start, ``changes`` the outputs
+    changed since it (by anything: a command, ``safe``, the dead-man switch) and
+    ``deadman_ms`` the armed dead-man timeout (0 when off).
     """
 
     switches: Mapping[str, int | str]
     rails: Mapping[str, bool]
     boot: str
     uptime_ms: int
+    changes: int
+    deadman_ms: int
 
     @classmethod
     def parse(cls, payload: str) -> FrontEndState:
-        """Read a ``state`` payload, ``ms1=4 ms2=0 ... boot=por uptime_ms=1234``."""
+        """Read a ``state`` payload, ``ms1=4 ... boot=por uptime_ms=1234 changes=7 deadman=0``."""
         fields = dict(item.split("=", 1) for item in payload.split() if "=" in item)
         try:
             switches: dict[str, int | str] = {s: int(fields[s]) for s in SWITCH_POSITIONS}
@@ -56,6 +61,8 @@ class FrontEndState:
                 MappingProxyType(rails),
                 fields["boot"],
                 int(fields["uptime_ms"]),
+                int(fields["changes"]),
+                int(fields["deadman"]),
             )
         except (KeyError, ValueError) as err:
             raise ProtocolError(DEVICE, f"malformed state reply {payload!r}", "state") from err
@@ -79,3 +86,34 @@ class FrontEndState:
         return released and self.switches["mts"] == "lna" and not any(
             self.rails[r] for r in ("ns", "6v", "12v")
         )
+
+    def same_outputs_as(self, other: FrontEndState) -> bool:
+        """Whether every switch and rail reads the same in both states."""
+        return self.switches == other.switches and self.rails == other.rails
+
+    def change_since(self, earlier: FrontEndState) -> str | None:
+        """What moved on the board between ``earlier`` and this state; ``None`` if nothing.
+
+        Nothing moved when the board did not restart (same ``boot``, ``uptime_ms`` not
+        smaller) and no output changed (same ``changes``). A restart releases every
+        switch, so it always counts, even if the outputs read the same afterwards.
+        ``uptime_ms`` wraps after 49.7 days: a wrap reads as a restart (a false alarm,
+        never a missed one).
+        """
+        if self.boot != earlier.boot or self.uptime_ms < earlier.uptime_ms:
+            return (
+                f"board restarted (boot={self.boot}, uptime {earlier.uptime_ms} -> "
+                f"{self.uptime_ms} ms, outputs now {self.describe()})"
+            )
+        if self.changes != earlier.changes:
+            moved = self.changes - earlier.changes
+            return f"{moved} output change(s) (now {self.describe()})"
+        return None
+
+    def unchanged_since(self, earlier: FrontEndState) -> bool:
+        """Whether nothing moved on the board since ``earlier`` (:meth:`change_since`)."""
+        return self.change_since(earlier) is None
+
+    def describe(self) -> str:
+        """The outputs in the firmware's words, ``ms1=4 ... mts=lna 6v=1 ...``."""
+        return " ".join(f"{name}={value}" for name, value in self.as_pins().items())

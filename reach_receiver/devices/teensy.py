@@ -1,4 +1,4 @@
-"""Driver of the front-end microcontroller (Teensy 3.5), protocol v1 of ``firmware/PROTOCOL.md``.
+"""Driver of the front-end microcontroller (Teensy 3.5), protocol v2 of ``firmware/PROTOCOL.md``.
 
 Every request is one tagged line, ``#<tag> <command>``; the reply ``OK 00 #<tag> <payload>``
 or ``ERR <code> #<tag> <reason>`` must carry the same tag, so a late reply to an earlier,
@@ -6,6 +6,13 @@ timed-out request is recognised and dropped. All commands set absolute states, s
 timeout or a garbled reply the driver resynchronises (a lone LF, then a tagged ``ping``)
 and repeats the request; error replies are never retried, they are the board's answer.
 Interlock refusals (codes 20-22) raise :class:`~reach_receiver.errors.InterlockError`.
+
+The firmware's dead-man switch (PROTOCOL.md, "Dead-man switch") puts the front-end in its
+safe state on its own when the host falls silent for the armed timeout
+(:meth:`Teensy.arm_deadman`); its report, ``ERR 50``, raises :class:`FrontEndTripped`.
+A keep-alive thread (:meth:`Teensy.start_keepalive`) renews it while the run is busy
+elsewhere, so the driver serialises its exchanges with a lock: one request and its reply,
+retries and resynchronisation included, never interleave with another thread's.
 """
 
 from __future__ import annotations
@@ -13,6 +20,8 @@ from __future__ import annotations
 import itertools
 import logging
 import re
+import threading
+import time
 
 from reach_receiver.devices.board import (
     DEVICE,
@@ -32,10 +41,17 @@ from reach_receiver.transports.serial_port import SerialTransport
 
 log = logging.getLogger(__name__)
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 
 #: Interlock refusals (PROTOCOL.md, "Interlocks"): the board said no on safety grounds.
 INTERLOCK_CODES = frozenset({20, 21, 22})
+
+#: The dead-man switch tripped: the front-end went safe on its own, the request was not run.
+TRIPPED_CODE = 50
+
+#: Dead-man timeouts the firmware accepts (ms); 0 disarms it.
+DEADMAN_MIN_MS = 100
+DEADMAN_MAX_MS = 3_600_000
 
 _REPLY = re.compile(r"^(OK|ERR) (\d\d) #([A-Za-z0-9]{1,8})(?: (.*))?$")
 
@@ -47,6 +63,22 @@ class TeensyError(DeviceError):
         self.code = code
         self.reason = reason
         super().__init__(DEVICE, f"ERR {code:02d} {reason}", command)
+
+
+class FrontEndTripped(TeensyError):
+    """The firmware's dead-man switch put the front-end in its safe state on its own.
+
+    Raised for ``ERR 50``. The request that received the report was not run; every
+    switch has been released and the noise source, ``6v`` and ``12v`` are off. A run
+    must not go on as if its signal path were still set.
+    """
+
+    def __init__(self, reason: str, command: str, seen_by: str = "") -> None:
+        self.code = TRIPPED_CODE
+        self.reason = reason
+        via = f", reported to the {seen_by}" if seen_by else ""
+        message = f"the front-end went to its safe state on its own ({reason}{via})"
+        DeviceError.__init__(self, DEVICE, message, command)
 
 
 class Teensy:
@@ -73,24 +105,46 @@ class Teensy:
         self._tags = (f"{n % 0xFFFFFF:x}" for n in itertools.count(1))
         self.identity = ""
         self.firmware = ""
+        # Re-entrant: a request's retries resynchronise while holding it.
+        self._lock = threading.RLock()
+        self._deadman_ms = 0
+        self._last_reply = time.monotonic()
+        self._tripped: FrontEndTripped | None = None  # seen by the keep-alive, not yet told
+        self._keepalive: threading.Thread | None = None
+        self._keepalive_stop = threading.Event()
+        self.keepalive_failures = 0
 
     # ----------------------------------------------------------------- life cycle
     def connect(self) -> None:
-        """Open the port, resynchronise and check identity and protocol version."""
-        self.transport.open()
-        self.resync()
-        self.identity = self.command("id")
-        version = dict(f.split("=", 1) for f in self.command("version").split() if "=" in f)
-        if version.get("protocol") != str(PROTOCOL_VERSION):
-            self.close()
-            raise DeviceError(
-                DEVICE, f"speaks protocol {version.get('protocol')}, need {PROTOCOL_VERSION}"
-            )
-        self.firmware = version.get("firmware", "?")
+        """Open the port, resynchronise and check identity and protocol version.
+
+        A dead-man trip left over from an earlier session is logged, not raised: it
+        happened before this session moved anything.
+        """
+        with self._lock:
+            self.transport.open()
+            try:
+                self.resync()
+            except FrontEndTripped as err:
+                log.warning("teensy: on connecting: %s", err)
+            self.identity = self.command("id")
+            version = dict(f.split("=", 1) for f in self.command("version").split() if "=" in f)
+            if version.get("protocol") != str(PROTOCOL_VERSION):
+                self.close()
+                raise DeviceError(
+                    DEVICE, f"speaks protocol {version.get('protocol')}, need {PROTOCOL_VERSION}"
+                )
+            self.firmware = version.get("firmware", "?")
 
     def close(self) -> None:
-        """Close the port (the board keeps its state)."""
-        self.transport.close()
+        """Stop the keep-alive and close the port (the board keeps its state).
+
+        An armed dead-man switch stays armed: without :meth:`disarm_deadman` first, the
+        front-end goes safe once the timeout has passed.
+        """
+        self.stop_keepalive()
+        with self._lock:
+            self.transport.close()
 
     def __enter__(self) -> Teensy:
         self.connect()
@@ -101,12 +155,23 @@ class Teensy:
 
     # ----------------------------------------------------------------- requests
     def resync(self) -> None:
-        """End any partial line on the board and drop replies up to a fresh tagged ``pong``."""
-        self.transport.write(b"\n")
-        self.transport.discard_input(quiet_s=0.02)
-        tag = next(self._tags)
-        self.transport.write(f"#{tag} ping\n".encode())
-        self._read_reply(tag, "ping", self.timeout_s)
+        """End any partial line on the board and drop replies up to a fresh tagged ``pong``.
+
+        Raises
+        ------
+        FrontEndTripped
+            A dead-man report was among the dropped replies, or answered the ``ping``.
+        """
+        with self._lock:
+            self.transport.write(b"\n")
+            dropped = self.transport.discard_input(quiet_s=0.02).decode("ascii", errors="replace")
+            reports = [_trip_report(line.strip(), "resync") for line in dropped.splitlines()]
+            tag = next(self._tags)
+            self.transport.write(f"#{tag} ping\n".encode())
+            self._read_reply(tag, "ping", self.timeout_s)
+            for report in reports:
+                if report is not None:
+                    raise report
 
     def _read_reply(self, tag: str, command: str, timeout_s: float) -> str:
         while True:
@@ -117,8 +182,15 @@ class Teensy:
                 raise ProtocolError(DEVICE, f"garbled reply {line!r}", command)
             kind, code, reply_tag, text = match.groups()
             if reply_tag != tag:
+                # A timed-out request's late reply; a dead-man report must not be lost.
+                report = _trip_report(line, command)
+                if report is not None:
+                    raise report
                 log.info("teensy: dropping stale reply %r", line)
                 continue
+            self._last_reply = time.monotonic()
+            if kind == "ERR" and int(code) == TRIPPED_CODE:
+                raise FrontEndTripped(text or "", command)
             if kind == "ERR":
                 raise TeensyError(int(code), text or "", command)
             return text or ""
@@ -126,8 +198,14 @@ class Teensy:
     def command(self, command: str, timeout_s: float | None = None) -> str:
         """Send one request and return the payload of its ``OK`` reply.
 
+        Safe to call from several threads: each request and its reply, retries included,
+        is one exchange under the driver's lock.
+
         Raises
         ------
+        FrontEndTripped
+            The dead-man switch had tripped (``ERR 50``, this request was not run), or the
+            keep-alive received that report since the last request.
         InterlockError
             The board refused on safety grounds (codes 20-22).
         TeensyError
@@ -135,6 +213,13 @@ class Teensy:
         DeviceTimeout, ProtocolError
             No usable reply after ``retries`` resynchronised repeats.
         """
+        with self._lock:
+            tripped, self._tripped = self._tripped, None
+            if tripped is not None:
+                raise FrontEndTripped(tripped.reason, command, "keep-alive") from tripped
+            return self._exchange(command, timeout_s)
+
+    def _exchange(self, command: str, timeout_s: float | None) -> str:
         wait = self.timeout_s if timeout_s is None else timeout_s
         last: DeviceError = DeviceTimeout(DEVICE, "no attempt made", command)
         for attempt in range(self.retries + 1):
@@ -158,6 +243,109 @@ class Teensy:
         kind = DeviceTimeout if isinstance(last, DeviceTimeout) else ProtocolError
         message = f"no valid reply after {self.retries + 1} attempts: {last}"
         raise kind(DEVICE, message, command) from last
+
+    # ----------------------------------------------------------------- dead-man switch
+    def arm_deadman(self, timeout_s: float) -> None:
+        """Arm the firmware's dead-man switch: safe state after ``timeout_s`` of silence.
+
+        Every request renews it; :meth:`start_keepalive` keeps it renewed. ``0`` disarms.
+
+        Raises
+        ------
+        ValueError
+            A timeout outside 0.1-3600 s (and not 0).
+        """
+        ms = round(timeout_s * 1000)
+        if ms == 0:
+            self.disarm_deadman()
+            return
+        if not DEADMAN_MIN_MS <= ms <= DEADMAN_MAX_MS:
+            raise ValueError(
+                f"dead-man timeout must be 0 (off) or {DEADMAN_MIN_MS / 1000:g}-"
+                f"{DEADMAN_MAX_MS / 1000:g} s, got {timeout_s!r}"
+            )
+        with self._lock:
+            self._expect(f"deadman {ms}", f"deadman={ms}")
+            self._deadman_ms = ms
+        log.info("teensy: dead-man switch armed, %g s", ms / 1000)
+
+    def disarm_deadman(self) -> None:
+        """Disarm the dead-man switch (the front-end then stays as it is left)."""
+        with self._lock:
+            self._deadman_ms = 0  # first: the keep-alive must not re-arm it
+            self._expect("deadman 0", "deadman=0")
+
+    def _expect(self, command: str, payload: str) -> None:
+        reply = self.command(command)
+        if reply != payload:
+            raise ProtocolError(DEVICE, f"unexpected reply {reply!r}", command)
+
+    def start_keepalive(self, period_s: float) -> None:
+        """Renew the dead-man switch from a daemon thread whenever ``period_s`` passed quietly.
+
+        The thread sends a request only when no reply has arrived for ``period_s``: while
+        armed ``deadman <timeout>`` (which also re-arms it after a watchdog reset of the
+        board), else ``ping``. Failures are logged and counted
+        (:attr:`keepalive_failures`), never raised; a dead-man report it receives is
+        raised by the next :meth:`command` of the run instead.
+        """
+        if not period_s > 0:
+            raise ValueError(f"keep-alive period must be positive, got {period_s!r}")
+        self.stop_keepalive()
+        self._keepalive_stop = threading.Event()
+        self._keepalive = threading.Thread(
+            target=self._keep_alive,
+            args=(period_s, self._keepalive_stop),
+            name="teensy-keepalive",
+            daemon=True,
+        )
+        self._keepalive.start()
+
+    def stop_keepalive(self, timeout_s: float | None = None) -> None:
+        """Stop the keep-alive thread and wait for it, at most ``timeout_s``.
+
+        By default the wait covers one exchange with all its retries.
+        """
+        thread, self._keepalive = self._keepalive, None
+        if thread is None:
+            return
+        self._keepalive_stop.set()
+        if timeout_s is None:
+            timeout_s = 2 * (self.retries + 1) * self.timeout_s + 1.0
+        thread.join(timeout_s)
+        if thread.is_alive():
+            log.warning("teensy: keep-alive thread still busy after %.1f s; left behind", timeout_s)
+
+    def _keep_alive(self, period_s: float, stop: threading.Event) -> None:
+        while not stop.is_set():
+            quiet = time.monotonic() - self._last_reply
+            if quiet < period_s:
+                stop.wait(period_s - quiet)
+            elif not self._renew(period_s, stop):
+                stop.wait(period_s)
+
+    def _renew(self, period_s: float, stop: threading.Event) -> bool:
+        """One keep-alive request, unless the run talked meanwhile; False if it failed."""
+        if not self._lock.acquire(timeout=0.1):  # the run is talking: that renews too
+            return True
+        try:
+            if stop.is_set() or time.monotonic() - self._last_reply < period_s:
+                return True
+            if self._deadman_ms:
+                self._exchange(f"deadman {self._deadman_ms}", None)
+            else:
+                self._exchange("ping", None)
+            return True
+        except FrontEndTripped as err:
+            log.error("teensy: keep-alive: %s", err)
+            self._tripped = err
+            return True
+        except Exception as err:  # never into the run: logged, counted, tried again
+            self.keepalive_failures += 1
+            log.warning("teensy: keep-alive failed: %s", err)
+            return False
+        finally:
+            self._lock.release()
 
     # ----------------------------------------------------------------- operations
     def select(self, switch: str, position: int | str) -> None:
@@ -209,6 +397,17 @@ class Teensy:
             return bytes.fromhex(payload).rstrip(b"\r\n")
         except ValueError as err:
             raise ProtocolError(DEVICE, f"reply is not hex: {payload!r}", "tec query") from err
+
+
+def _trip_report(line: str, command: str) -> FrontEndTripped | None:
+    """The :class:`FrontEndTripped` a reply line reports (``ERR 50``, tagged or not), or None."""
+    match = _REPLY.match(line)
+    if match is not None:
+        if match.group(1) == "ERR" and int(match.group(2)) == TRIPPED_CODE:
+            return FrontEndTripped(match.group(4) or "", command)
+        return None
+    prefix = f"ERR {TRIPPED_CODE} "
+    return FrontEndTripped(line[len(prefix) :], command) if line.startswith(prefix) else None
 
 
 def check_position(switch: str, position: int | str) -> None:

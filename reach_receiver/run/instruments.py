@@ -7,6 +7,11 @@ drivers are built here, from the site's typed settings
 protocols (:mod:`reach_receiver.devices.protocols`). Connecting is explicit
 (:meth:`Instruments.connect`) and idempotent; a failure part-way closes whatever was
 already open and names the device that failed.
+
+Once the Teensy is connected, its firmware's dead-man switch is armed
+(``devices.teensy.deadman_s``) and the driver's keep-alive renews it every third of the
+timeout, so a host that dies or loses the link leaves the front-end safe; closing stops
+the keep-alive and disarms it.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from dataclasses import dataclass, field
 
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
+from reach_receiver.devices.board import FrontEndState
 from reach_receiver.devices.protocols import (
     Device,
     ReflectionMeter,
@@ -31,6 +37,7 @@ from reach_receiver.devices.tec import SerialTecLink, Tec, TecLink
 from reach_receiver.devices.tec_via_teensy import TeensyTecLink
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.devices.vna import Vna
+from reach_receiver.errors import ReceiverError
 from reach_receiver.frontend.paths import FrontEnd
 from reach_receiver.transports.tc08_library import load_libusbtc08
 
@@ -42,7 +49,8 @@ class Instruments:
     """The drivers of one site, not yet connected.
 
     ``links`` lists the devices :meth:`connect` opens, in order; the TEC behind the
-    Teensy is opened separately (:meth:`connect_tec`), once its rail is on.
+    Teensy is opened separately (:meth:`connect_tec`), once its rail is on. ``deadman_s``
+    is the Teensy's dead-man timeout (0 = off), armed when it connects.
     """
 
     site: SiteConfig
@@ -58,6 +66,7 @@ class Instruments:
     _stack: ExitStack = field(default_factory=ExitStack)
     connected: bool = False
     tec_connected: bool = False
+    deadman_s: float = 0.0
 
     @classmethod
     def from_site(cls, site: SiteConfig, clock: Clock) -> Instruments:
@@ -84,7 +93,19 @@ class Instruments:
             ("spectrometer", spectrometer),
             ("tc08", tc08),
         )
-        return cls(site, clock, teensy, vna, spectrometer, tc08, tec, frontend, links, tec)
+        return cls(
+            site,
+            clock,
+            teensy,
+            vna,
+            spectrometer,
+            tc08,
+            tec,
+            frontend,
+            links,
+            tec,
+            deadman_s=settings.teensy.deadman_s,
+        )
 
     def connect(self) -> None:
         """Connect every instrument (once); on a failure, close those already connected."""
@@ -95,8 +116,16 @@ class Instruments:
                 log.info("connecting %s", name)
                 device.connect()
                 stack.callback(device.close)
+                if isinstance(device, Teensy) and self.deadman_s > 0:
+                    self._guard(device, stack)
             self._stack = stack.pop_all()
         self.connected = True
+
+    def _guard(self, teensy: Teensy, stack: ExitStack) -> None:
+        """Arm the dead-man switch and keep it alive; undone before the port closes."""
+        stack.callback(_release_deadman, teensy)
+        teensy.arm_deadman(self.deadman_s)
+        teensy.start_keepalive(self.deadman_s / 3)
 
     def connect_tec(self) -> None:
         """Connect the TEC controller once (behind the Teensy, its rail must be on)."""
@@ -106,10 +135,38 @@ class Instruments:
         self._stack.callback(self.tec_link.close)
         self.tec_connected = True
 
+    def make_safe(self) -> FrontEndState:
+        """The front-end's safe state, whatever became of the run's link to the Teensy.
+
+        Through the open link when the instruments are connected, and if that fails (the
+        port was lost), or they never were (a stop before ``initialise`` finished),
+        through a link opened for the purpose and closed again.
+        """
+        if self.connected:
+            try:
+                return self.frontend.safe()
+            except (ReceiverError, OSError) as err:
+                log.warning("safe state through the run's link failed (%s); reopening", err)
+        teensy = dict(self.links)["teensy"]
+        with ExitStack() as stack:
+            teensy.close()
+            teensy.connect()
+            stack.callback(teensy.close)
+            return self.frontend.safe()
+
     def close(self) -> None:
         """Close every connected instrument (the front-end keeps its state)."""
         self._stack.close()
         self.connected = self.tec_connected = False
+
+
+def _release_deadman(teensy: Teensy) -> None:
+    """Stop the keep-alive and disarm; a failure is logged, closing goes on."""
+    teensy.stop_keepalive()
+    try:
+        teensy.disarm_deadman()
+    except ReceiverError as err:
+        log.warning("teensy: could not disarm the dead-man switch on closing: %s", err)
 
 
 class _LazyLibrary:

@@ -11,6 +11,13 @@ reference load (the ambient 50 ohm calibrator, as deployed) and the noise source
 diode powered. The calibration engine takes their ratio ``Q = (P_src - P_L) / (P_NS - P_L)``,
 which cancels the receiver's gain as long as it is steady over one cycle. The first
 spectrum after each switch change is discarded: it may straddle the change.
+
+Every integration is bracketed by two reads of the board's state
+(:func:`integrate_connected`): the one :meth:`FrontEnd.connect` returns, and one right
+after. If the board restarted (a watchdog reset releases every switch) or any output
+moved in between (the dead-man switch, anything else), the spectra did not all see the
+source: the integration is discarded, the path connected again and the integration
+repeated, at most :data:`MAX_REPEATS` times.
 """
 
 from __future__ import annotations
@@ -25,6 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reach_receiver.clock import Clock
+from reach_receiver.devices.board import DEVICE as FRONT_END
+from reach_receiver.devices.board import FrontEndState
 from reach_receiver.devices.protocols import ReflectionMeter, SpectraSource, Thermometer
 from reach_receiver.devices.spectrometer import AccumulatedSpectrum
 from reach_receiver.devices.tc08 import Tc08Reading
@@ -37,8 +46,11 @@ from reach_receiver.store.run_store import DICKE_POSITIONS
 __all__ = [
     "DICKE_POSITIONS",
     "DICKE_REFERENCES",
+    "MAX_REPEATS",
     "DickeCycle",
+    "Integration",
     "TemperatureLogger",
+    "integrate_connected",
     "source_temperature",
     "take_dicke_cycle",
     "take_s11",
@@ -53,6 +65,9 @@ CycleProgress = Callable[[str, int, int], None]
 
 #: Noise of one thermocouple reading when too few readings exist to measure it (K).
 THERMOCOUPLE_NOISE_K = 0.1
+
+#: Integrations of one position repeated at most after the front-end moved during them.
+MAX_REPEATS = 2
 
 
 class TemperatureLogger:
@@ -116,7 +131,9 @@ class TemperatureLogger:
 class DickeCycle:
     """The three integrations of one Dicke cycle and the temperatures read during them.
 
-    ``temperatures`` maps each position to the readings taken while it integrated.
+    ``temperatures`` maps each position to the readings taken while it integrated;
+    ``repeats`` to how often its integration was discarded and taken again because the
+    front-end moved during it (:func:`integrate_connected`).
     """
 
     source: str
@@ -124,6 +141,7 @@ class DickeCycle:
     integration_s: Mapping[str, float]
     temperatures: Mapping[str, tuple[Tc08Reading, ...]]
     switch_states: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    repeats: Mapping[str, int] = field(default_factory=dict)
 
     def temperature_k(self, port: int, position: str = "source") -> float:
         """Mean of the port's good readings during one position's integration, kelvin."""
@@ -157,19 +175,37 @@ def take_dicke_cycle(
 
     With a running :class:`TemperatureLogger`, each position keeps the readings taken
     while its averaged spectra integrated (:func:`readings_during`).
-    ``progress`` is called after every spectrum; it may stop the cycle by raising.
+    ``progress`` is called after every spectrum; it may stop the cycle by raising. A
+    position during which the front-end moved is integrated again
+    (:func:`integrate_connected`; a repeat reports its spectra from 1 again).
+
+    Raises
+    ------
+    DeviceError
+        The front-end moved during more than :data:`MAX_REPEATS` repeats of a position.
     """
     connects = {"source": source, **DICKE_REFERENCES}
     spectra: dict[str, AccumulatedSpectrum] = {}
     seconds: dict[str, float] = {}
     readings: dict[str, tuple[Tc08Reading, ...]] = {}
     states: dict[str, Mapping[str, str]] = {}
+    repeats: dict[str, int] = {}
     for position in DICKE_POSITIONS:
-        states[position] = frontend.connect(connects[position], "lna").as_pins()
         report = None
         if progress is not None:
             report = _position_progress(progress, position)
-        accumulated = spectrometer.integrate(n_spectra, discard=discard, on_spectrum=report)
+        taken = integrate_connected(
+            frontend,
+            spectrometer,
+            connects[position],
+            n_spectra,
+            discard=discard,
+            on_spectrum=report,
+            label=f"Dicke cycle of {source}, {position} position",
+        )
+        accumulated = taken.spectrum
+        states[position] = taken.state.as_pins()
+        repeats[position] = taken.repeats
         spectra[position] = accumulated
         seconds[position] = integration_seconds(accumulated, spectrometer.period)
         if temperatures is not None:
@@ -177,7 +213,73 @@ def take_dicke_cycle(
                 temperatures, accumulated.timestamps, spectrometer.period or 0.0
             )
         log.info("%s: %s position, %d spectra", source, position, accumulated.n_spectra)
-    return DickeCycle(source, spectra, seconds, readings, states)
+    return DickeCycle(source, spectra, seconds, readings, states, repeats)
+
+
+@dataclass(frozen=True)
+class Integration:
+    """One integration the front-end held still for.
+
+    ``state`` is the board's state read back when the path was connected, ``repeats``
+    how many integrations before this one were discarded.
+    """
+
+    spectrum: AccumulatedSpectrum
+    state: FrontEndState
+    repeats: int
+
+
+def integrate_connected(
+    frontend: FrontEnd,
+    spectrometer: SpectraSource,
+    source: str,
+    n_spectra: int,
+    *,
+    discard: int = 1,
+    on_spectrum: Callable[[int, int], None] | None = None,
+    label: str = "",
+    max_repeats: int = MAX_REPEATS,
+) -> Integration:
+    """Connect ``source`` to the LNA and integrate, again if the front-end moved meanwhile.
+
+    The state :meth:`FrontEnd.connect` reads back is compared with one read right after
+    the integration (:meth:`FrontEndState.change_since`): a restart of the board (a
+    watchdog reset releases every switch) or any output change means that some spectra
+    saw something else than ``source``. That integration is dropped with a warning, the
+    path connected again (the restart released it) and the integration repeated.
+
+    Raises
+    ------
+    DeviceError
+        The front-end moved during the integration and during ``max_repeats`` repeats.
+    FrontEndTripped
+        From the driver: the firmware's dead-man switch went safe (never repeated: the
+        host lost the board for a whole timeout).
+    """
+    what = label or f"integration of {source}"
+    repeats = 0
+    while True:
+        before = frontend.connect(source, "lna")
+        spectrum = spectrometer.integrate(n_spectra, discard=discard, on_spectrum=on_spectrum)
+        change = frontend.matrix.read_state().change_since(before)
+        if change is None:
+            return Integration(spectrum, before, repeats)
+        if repeats >= max_repeats:
+            raise DeviceError(
+                FRONT_END,
+                f"{what}: the front-end moved during the integration and during all "
+                f"{max_repeats} repeats (last: {change}); nothing of it is kept",
+            )
+        repeats += 1
+        log.warning(
+            "%s: the front-end moved during the integration: %s; discarding it, "
+            "connecting %s again and repeating it (%d of at most %d)",
+            what,
+            change,
+            source,
+            repeats,
+            max_repeats,
+        )
 
 
 def readings_during(

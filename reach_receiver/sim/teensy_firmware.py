@@ -2,18 +2,22 @@
 
 ``firmware/`` builds the C++ core of the Teensy firmware against a host hardware layer
 into ``firmware/build/teensy-sim`` (``make -C firmware sim``). That program serves the
-Teensy protocol (``firmware/PROTOCOL.md``, version 1) on a pseudo-terminal, so a driver
+Teensy protocol (``firmware/PROTOCOL.md``, version 2) on a pseudo-terminal, so a driver
 opens :attr:`FirmwareTeensy.port` with pyserial exactly as it opens ``/dev/ttyACM0``, and
 the bytes it exchanges are answered by the code that runs on the board.
 
 The program's side channel (PROTOCOL.md, "Host build as simulator"):
 
 * standard output: ``PTY <path>`` once, then ``PINS <state payload>`` at start and after
-  every change of an output, e.g. ``PINS ms1=3 ms2=0 ... 12v=1 ... boot=por uptime_ms=52``;
+  every change of an output, e.g.
+  ``PINS ms1=3 ms2=0 ... 12v=1 ... boot=por uptime_ms=52 changes=2 deadman=0``;
 * standard input: ``I2C <addr> <celsius>`` / ``I2C <addr> fail`` / ``I2C <addr> absent``
   set what a simulated MCP9808 reads, ``HANG`` stops the firmware's main loop so that its
   simulated watchdog resets it (power-on state, ``boot=wdog``);
 * ``--uart1 <path>``: the TEC controller's serial device behind ``tec send/query``.
+
+The firmware's dead-man switch runs on the host's real clock, so it trips (and shows as a
+``PINS`` line) after its timeout of real time without a request, as on the board.
 
 :class:`FirmwareTeensy` builds the program when it is missing or older than its sources,
 starts it, follows its ``PINS`` lines on a reader thread and offers them as :attr:`state`
@@ -112,7 +116,7 @@ def ensure_built(firmware_dir: Path = FIRMWARE_DIR, timeout_s: float = 300.0) ->
 
 
 def parse_pins(payload: str) -> dict[str, str]:
-    """Split a ``state`` payload (``ms1=3 ... uptime_ms=52``) into a name -> value dict."""
+    """Split a ``state`` payload (``ms1=3 ... deadman=0``) into a name -> value dict."""
     return dict(field.split("=", 1) for field in payload.split() if "=" in field)
 
 

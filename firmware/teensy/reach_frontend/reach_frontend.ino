@@ -1,4 +1,4 @@
-// REACH front-end controller, Teensy 3.5: PROTOCOL.md version 1 over USB serial.
+// REACH front-end controller, Teensy 3.5: PROTOCOL.md version 2 over USB serial.
 // The logic lives in the reach_core library (firmware/core); this sketch only wires it
 // to the board. Build: see firmware/README.md.
 #include "teensy_hal.h"
@@ -19,5 +19,6 @@ void loop() {
     int byte = Serial.read();
     if (byte >= 0) firmware.feed(static_cast<uint8_t>(byte));
   }
+  firmware.poll();      // the dead-man switch: safe state once the host has gone quiet
   hal.watchdog_kick();  // from the main loop only: a hang anywhere resets the board
 }

@@ -13,6 +13,8 @@ averaged, beside the average itself.
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +28,13 @@ from reach_receiver.schedule.timing import TimingWalk, hms
 
 from ..context import RunContext
 from ..kind import RunnableKind
-from ..measure import DICKE_POSITIONS, DICKE_REFERENCES, source_temperature, take_dicke_cycle
+from ..measure import (
+    DICKE_POSITIONS,
+    DICKE_REFERENCES,
+    integrate_connected,
+    source_temperature,
+    take_dicke_cycle,
+)
 
 
 def lst_of_spectra(run: RunContext, starts: tuple[float, ...]) -> list[float]:
@@ -71,7 +79,11 @@ def dicke_cycle(run: RunContext, source: str, seconds: float, label: str = "") -
             k: {"connected": connects[k], **cycle.switch_states.get(k, {})} for k in cycle.spectra
         },
         counters={
-            k: {"packets_lost": v.packets_lost, "heaps_dropped": v.heaps_dropped}
+            k: {
+                "packets_lost": v.packets_lost,
+                "heaps_dropped": v.heaps_dropped,
+                "repeats": cycle.repeats.get(k, 0),
+            }
             for k, v in cycle.spectra.items()
         },
         timestamp=run.clock.now(),
@@ -118,13 +130,30 @@ class MeasureSpectrumKind(RunnableKind[MeasureSpectrum]):
         """The source to the LNA."""
         return [(step.source, "lna")]
 
+    def rest(
+        self, step: MeasureSpectrum, measured: Sequence[tuple[str, str]]
+    ) -> MeasureSpectrum | None:
+        """Nothing once its spectrum is stored."""
+        return None if ("spectrum", step.source) in measured else step
+
     def execute(self, step: MeasureSpectrum, run: RunContext) -> None:
-        """Integrate and store, with each spectrum's time and LST."""
+        """Integrate and store, with each spectrum's time and LST.
+
+        An integration during which the front-end moved is taken again
+        (:func:`~reach_receiver.run.measure.integrate_connected`).
+        """
         devices = run.instruments
-        state = devices.frontend.connect(step.source, "lna")
         n = run.n_spectra(step.seconds)
         report = run.spectrum_progress(f"spectrum of {step.source}", run.period_s)
-        acc = devices.spectrometer.integrate(n, on_spectrum=report)
+        taken = integrate_connected(
+            devices.frontend,
+            devices.spectrometer,
+            step.source,
+            n,
+            on_spectrum=report,
+            label=f"spectrum of {step.source}",
+        )
+        acc, state = taken.spectrum, taken.state
         run.store.add_spectrum(
             step.source,
             acc.mean,
@@ -168,6 +197,12 @@ class DickeKind(RunnableKind[Dicke]):
     def connections(self, step: Dicke) -> list[tuple[str, str]]:
         """Each source's three positions."""
         return dicke_connections(step.sources)
+
+    def rest(self, step: Dicke, measured: Sequence[tuple[str, str]]) -> Dicke | None:
+        """The sources whose cycle is not stored yet."""
+        done = {name for kind, name in measured if kind == "dicke"}
+        left = tuple(s for s in step.sources if s not in done)
+        return dataclasses.replace(step, sources=left) if left else None
 
     def execute(self, step: Dicke, run: RunContext) -> None:
         """A Dicke cycle of each source, stored as soon as it is complete."""
