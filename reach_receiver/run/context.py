@@ -15,6 +15,7 @@ its file with the reason.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import threading
@@ -129,7 +130,10 @@ class NoProgress:
 class RunContext:
     """The run's instruments, store, clock and the state it carries between steps.
 
-    ``run_steps`` executes nested steps (a ``repeat``'s body) with the runner's rules.
+    ``run_steps(steps, scope)`` executes nested steps (a ``repeat``'s body) with the
+    runner's rules; ``path`` is the position of the step being executed (``(3,)`` for the
+    fourth top-level step, ``(3, 1, 0)`` for the first step of its second repetition),
+    which the run file records as each step starts and ends.
     """
 
     site: SiteConfig
@@ -139,7 +143,10 @@ class RunContext:
     kinds: KindRegistry
     stop: StopToken = field(default_factory=StopToken)
     progress: Progress = field(default_factory=NoProgress)
-    run_steps: Callable[[Sequence[Step]], None] = field(default=lambda steps: None)
+    run_steps: Callable[[Sequence[Step], tuple[int, ...]], None] = field(
+        default=lambda steps, scope: None
+    )
+    path: tuple[int, ...] = ()
     sweep: SweepSettings = field(default_factory=SweepSettings)
     solution: Solution | None = None
     temperatures: TemperatureLogger | None = None
@@ -209,3 +216,17 @@ class RunContext:
             finally:
                 self.temperatures.stop()
                 self.temperatures = None
+
+
+#: The kind of the events that record each step's start and end.
+STEP_EVENT = "step"
+
+
+def record_step(run: RunContext, path: tuple[int, ...], step: Step, state: str) -> None:
+    """A ``step`` event: which step (its path and line) started or ended, durably.
+
+    The run file's record of how far a run got, which a resumed run reads
+    (:mod:`reach_receiver.run.resume`).
+    """
+    text = json.dumps({"path": list(path), "state": state, "where": str(step.where)})
+    run.store.add_event(STEP_EVENT, text, timestamp=run.clock.now())

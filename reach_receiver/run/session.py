@@ -37,9 +37,18 @@ from reach_receiver.schedule.timing import TimelineEntry, timeline
 from reach_receiver.store.parts import FILE_MODE
 from reach_receiver.store.run_store import RunStore, software_versions
 
-from .context import CheckRecord, NoProgress, Progress, RunContext, RunInterrupted, StopToken
+from .context import (
+    CheckRecord,
+    NoProgress,
+    Progress,
+    RunContext,
+    RunInterrupted,
+    StopToken,
+    record_step,
+)
 from .instruments import Instruments
 from .kind import RunnableKind
+from .resume import carry
 from .steps import STANDARD_KINDS
 from .steps.calibrate import CalibrationOutcome
 
@@ -120,6 +129,8 @@ class RunSession:
     metadata: Mapping[str, Any] = field(default_factory=dict)
     token: StopToken = field(default_factory=StopToken)
     directory: Path | None = None
+    #: An interrupted run this one continues: its measurements are copied in first.
+    carry_from: Path | None = None
     #: Set once the run is putting the front-end safe and closing its file: nothing may
     #: interrupt that (a second Ctrl-C is then ignored by the command line).
     closing: bool = False
@@ -181,6 +192,9 @@ class RunSession:
             band_hz=self.site.band_hz,
         )
         store.open()
+        if self.carry_from is not None:
+            carried = carry(store, self.carry_from)
+            log.info("carried %d measurements over from %s", carried, self.carry_from)
         self.progress.started(self.directory)
         with _run_log(self.directory / RUN_LOG):
             log.info("run %s in %s", self.schedule.name, self.directory)
@@ -195,7 +209,7 @@ class RunSession:
                 stop=self.token,
                 progress=self.progress,
             )
-            context.run_steps = lambda steps: self._run_steps(context, steps)
+            context.run_steps = lambda steps, scope: self._run_steps(context, steps, scope)
             return self._run(context, entries, total_s)
 
     def _run(
@@ -211,7 +225,7 @@ class RunSession:
                 left = total_s - entries[index].start_s if index < len(entries) else None
                 text = entries[index].description if index < len(entries) else ""
                 self.progress.step(index + 1, len(steps), step, text, left)
-                self._execute(run, step)
+                self._execute(run, step, (index,))
             self.closing = True
             run.stop_temperatures()
             run_file: Path | None = run.store.finish("completed")
@@ -233,17 +247,22 @@ class RunSession:
             self.clock.now() - start,
         )
 
-    def _run_steps(self, run: RunContext, steps: Sequence[Step]) -> None:
-        for step in steps:
+    def _run_steps(self, run: RunContext, steps: Sequence[Step], scope: tuple[int, ...]) -> None:
+        for index, step in enumerate(steps):
             self.token.check()
-            self._execute(run, step)
+            self._execute(run, step, (*scope, index))
 
-    def _execute(self, run: RunContext, step: Step) -> None:
+    def _execute(self, run: RunContext, step: Step, path: tuple[int, ...]) -> None:
+        """Run one step, recording in the run file that it started and that it ended."""
         log.info("%s: %s", step.where, self.kinds.written(step))
         kind = self.kinds.of(step)
         if not isinstance(kind, RunnableKind):  # checked before the run started
             raise TypeError(f"step kind {kind.name} has no executor")
+        record_step(run, path, step, "started")
+        run.path = path
         kind.execute(step, run)
+        run.path = path
+        record_step(run, path, step, "done")
 
 
 def _ending(err: BaseException, current: Step | None, requested: str) -> tuple[str, str]:
@@ -270,7 +289,7 @@ def _fail_safe(run: RunContext, status: str, reason: str, err: BaseException) ->
     else:
         log.error("run %s: %s", status, reason)
     try:
-        state = run.instruments.frontend.safe()
+        state = run.instruments.make_safe()
         safe_note = "front-end in its safe state" + ("" if state.is_safe else " (reads otherwise!)")
         pins = state.as_pins()
     except (ReceiverError, OSError) as safe_err:

@@ -14,7 +14,7 @@ one class registered once.
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Literal, TypeVar
 
 from reach_receiver.config.fields import Fields
 
@@ -44,6 +44,10 @@ class StepKind(Generic[S]):
     keys: ClassVar[tuple[str, ...]] = ()
     #: Whether it commands the hardware, so that it needs ``initialise`` first.
     needs_devices: ClassVar[bool] = True
+    #: What a resumed run does with it when it was done before the interruption:
+    #: ``"skip"`` it (a measurement), or ``"replay"`` it (it sets up state that a restart
+    #: lost: connections, rails, the temperature log, the VNA's calibration).
+    on_resume: ClassVar[Literal["skip", "replay"]] = "skip"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> S:
         """Read the step's arguments (``f`` records every mistake; return a step anyway)."""
@@ -76,6 +80,21 @@ class StepKind(Generic[S]):
         """Steps nested inside this one (a ``repeat``'s body)."""
         del step
         return ()
+
+    def rest(self, step: S, measured: Sequence[tuple[str, str]]) -> Step | None:
+        """What is left of ``step`` after an interruption, given what it had measured.
+
+        ``measured`` lists the (kind, name) of the measurements the step stored before it
+        was interrupted. By default the whole step again; a kind that measures several
+        things (sources, targets, cycles) returns the ones still to do, or ``None``.
+        """
+        del measured
+        return step
+
+    def after_repetitions(self, step: S, done: int) -> Step | None:
+        """A step with children: what is left after ``done`` whole repetitions of them."""
+        del step, done
+        return None
 
 
 class KindRegistry:

@@ -57,6 +57,7 @@ from .parts import (
     UNITS_REFLECTION,
     UNITS_S,
     StoreError,
+    as_str,
     clean_temporaries,
     dataset,
     fsync_directory,
@@ -71,6 +72,8 @@ log = logging.getLogger(__name__)
 #: Dicke positions (thesis 2.1.1): the source, the reference load, the noise source.
 DICKE_POSITIONS = ("source", "load", "ns")
 STATUSES = ("completed", "interrupted", "failed")
+#: Attributes a part file writes for itself, not copied from another run's measurement.
+_OWN_ATTRS = {"format", "format_version", "kind", "name", "sequence", "timestamp"}
 _UNIT_SUFFIXES = (("_hz", UNITS_HZ), ("_k", UNITS_K), ("_c", UNITS_C), ("_s", UNITS_S))
 
 
@@ -447,6 +450,22 @@ class RunStore:
             dataset(f, "flags", np.asarray(flags, dtype=bool), UNITS_NONE)
 
         self._add("calibrated", name, timestamp, fill)
+
+    def add_copy(self, group: Any, *, origin: str) -> int:
+        """Store a copy of a measurement of another run (a resumed run carries them on).
+
+        The copy keeps the measurement's kind, name, time, data and attributes, and says
+        where it came from (attribute ``carried_from``).
+        """
+        kind, name = as_str(group.attrs["kind"]), as_str(group.attrs["name"])
+
+        def fill(f: Any) -> None:
+            for key in group:
+                group.copy(group[key], f, name=key)
+            f.attrs.update({k: v for k, v in group.attrs.items() if k not in _OWN_ATTRS})
+            f.attrs["carried_from"] = origin
+
+        return self._add(kind, name, float(group.attrs["timestamp"]), fill)
 
     def add_event(self, kind: str, message: str, *, timestamp: float) -> None:
         """Store an event: a fault, the safe state, an operator's Ctrl-C."""

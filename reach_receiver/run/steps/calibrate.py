@@ -13,6 +13,7 @@ by its distance to the noise floor on the validation source (the antenna when me
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,6 +143,10 @@ class CalibrateKind(RunnableKind[Calibrate]):
     def duration(self, step: Calibrate, walk: TimingWalk) -> float:
         """10 s."""
         return 10.0
+
+    def rest(self, step: Calibrate, measured: Sequence[tuple[str, str]]) -> Calibrate | None:
+        """Nothing once its solution is stored."""
+        return None if any(kind == "solution" for kind, _ in measured) else step
 
     def execute(self, step: Calibrate, run: RunContext) -> None:
         """Solve, verify against the benchmark, store, and summarise."""

@@ -12,7 +12,9 @@ the latest S11s, over the solution's band, and its RFI channels flagged
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from reach_receiver.config.fields import Fields
@@ -94,6 +96,12 @@ class ObserveKind(RunnableKind[Observe]):
     def connections(self, step: Observe) -> list[tuple[str, str]]:
         """The Dicke positions, then the test load."""
         return [*dicke_connections((step.source,)), ("test_load", "vna")]
+
+    def rest(self, step: Observe, measured: Sequence[tuple[str, str]]) -> Observe | None:
+        """The cycles not taken yet."""
+        done = sum(1 for kind, name in measured if (kind, name) == ("dicke", step.source))
+        left = step.cycles - done
+        return dataclasses.replace(step, cycles=left) if left > 0 else None
 
     def execute(self, step: Observe, run: RunContext) -> None:
         """Each cycle: the test load when due, the cycle, its calibration."""

@@ -8,6 +8,7 @@ problem before anything runs. The dry run lists the first repetition, indented.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from reach_receiver.config.fields import REQUIRED, UNRESOLVED, Fields
@@ -76,11 +77,16 @@ class RepeatKind(RunnableKind[Repeat]):
         if step.count > 1:
             board.walk(step.steps)
 
+    def after_repetitions(self, step: Repeat, done: int) -> Repeat | None:
+        """The repetitions still to come."""
+        left = step.count - done
+        return dataclasses.replace(step, count=left) if left > 0 else None
+
     def execute(self, step: Repeat, run: RunContext) -> None:
         """Each repetition, then the rest of its period."""
         for repetition in range(step.count):
             began = run.clock.now()
-            run.run_steps(step.steps)
+            run.run_steps(step.steps, (*run.path, repetition))
             if step.period_s is not None and repetition + 1 < step.count:
                 left = began + step.period_s - run.clock.now()
                 text = f"repeat {repetition + 1}/{step.count}: waiting for the next period"

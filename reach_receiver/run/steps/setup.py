@@ -62,6 +62,7 @@ class InitialiseKind(RunnableKind[Initialise]):
     step_type = Initialise
     keys = ("rails",)
     needs_devices = False
+    on_resume = "replay"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Initialise:
         """``rails``: the switchable rails to power, in any order."""
@@ -114,6 +115,7 @@ class PowerKind(RunnableKind[Power]):
     name = "power"
     step_type = Power
     keys = (*SWITCHABLE_RAILS, *FIXED_RAILS)
+    on_resume = "replay"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Power:
         """``{rail: on|off, ...}``; ``3v3`` and ``5v`` are refused."""
@@ -182,6 +184,7 @@ class ConnectKind(RunnableKind[Connect]):
     name = "connect"
     step_type = Connect
     keys = ("source", "to")
+    on_resume = "replay"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Connect:
         """``source`` (a source; for the VNA also ``lna`` or a standard) and ``to``."""
@@ -261,6 +264,7 @@ class TemperaturesKind(RunnableKind[Temperatures]):
     name = "temperatures"
     step_type = Temperatures
     keys = ("period_s",)
+    on_resume = "replay"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Temperatures:
         """``period_s``: seconds between readings."""
@@ -299,6 +303,7 @@ class TecKind(RunnableKind[Tec]):
     name = "tec"
     step_type = Tec
     keys = ("setpoint_c", "wait")
+    on_resume = "replay"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Tec:
         """``setpoint_c`` in :data:`TEC_RANGE_C`; ``wait``: true or its settings."""

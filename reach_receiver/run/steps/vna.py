@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, cast
@@ -105,6 +106,7 @@ class VnaCalibrateKind(RunnableKind[VnaCalibrate]):
     name = "vna_calibrate"
     step_type = VnaCalibrate
     keys = ("sweep",)
+    on_resume = "replay"
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> VnaCalibrate:
         """``sweep``: settings checked against the VNA's limits."""
@@ -262,6 +264,12 @@ class MeasureS11Kind(RunnableKind[MeasureS11]):
     def connections(self, step: MeasureS11) -> list[tuple[str, str]]:
         """Each target to the VNA."""
         return [(target, "vna") for target in step.targets]
+
+    def rest(self, step: MeasureS11, measured: Sequence[tuple[str, str]]) -> MeasureS11 | None:
+        """The targets not measured yet."""
+        done = {name for kind, name in measured if kind == "s11"}
+        left = tuple(t for t in step.targets if t not in done)
+        return dataclasses.replace(step, targets=left) if left else None
 
     def execute(self, step: MeasureS11, run: RunContext) -> None:
         """Measure and store each target's reflection."""
