@@ -1,4 +1,4 @@
-"""The receiver side's commands: ``reach-run`` and ``reach-sim``.
+"""The receiver side's commands: ``reach-run``, ``reachd`` and ``reach-sim``.
 
 Each is a thin layer over the packages below it: ``reach-run`` over the run layer
 (:mod:`reach_receiver.run`), ``reach-sim`` over the simulated receiver
@@ -6,7 +6,8 @@ Each is a thin layer over the packages below it: ``reach-run`` over the run laye
 traceback and exit non-zero (2 for invalid input, 1 for a run that did not complete).
 """
 
+from .reachd import reachd_main
 from .run import run_main
 from .sim import sim_main
 
-__all__ = ["run_main", "sim_main"]
+__all__ = ["reachd_main", "run_main", "sim_main"]

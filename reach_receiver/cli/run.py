@@ -6,7 +6,9 @@ A thin command over the run layer (:class:`~reach_receiver.run.session.RunSessio
    ``/etc/reach/site.yaml``; with ``--sim`` the simulated receiver's) and checked, and
    the schedule is compiled against it; every mistake is printed as ``file:line: key:
    message``: exit 2, and no device has been contacted. The estimated duration is
-   printed.
+   printed. When ``reachd`` owns the hardware, the schedule goes to it instead
+   (:mod:`.remote`: submit, follow, detach, ``--attach``); otherwise ``reach-run`` runs
+   it itself, holding the same hardware lock the daemon takes.
 2. ``--validate`` stops there; ``--dry-run`` prints the step list with its timing.
 3. Otherwise the run goes, with progress on standard error. SIGINT (Ctrl-C), SIGTERM
    and SIGHUP (a dropped SSH session) ask it to stop: the front-end goes to its safe
@@ -27,8 +29,10 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import FrameType
 
-from reach_receiver.clock import Clock, CompressedClock, SystemClock
+from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig, find_site, load_site
+from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
+from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
 from reach_receiver.errors import ReceiverError
 from reach_receiver.run.context import NoProgress, Progress
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
@@ -42,6 +46,7 @@ from reach_receiver.sim.receiver import (
     spectrum_period_for,
 )
 
+from . import remote
 from .display import PlainProgress, RichProgressDisplay
 from .logs import add_version, configure_logging
 
@@ -58,7 +63,9 @@ def parser() -> argparse.ArgumentParser:
         description="Check and run a YAML schedule against the receiver (a site file) or the "
         "simulated receiver (--sim).",
     )
-    p.add_argument("schedule", type=Path, help="the schedule, e.g. schedules/calibrate.yaml")
+    p.add_argument(
+        "schedule", type=Path, nargs="?", help="the schedule, e.g. schedules/calibrate.yaml"
+    )
     target = p.add_mutually_exclusive_group()
     target.add_argument(
         "--site",
@@ -85,6 +92,17 @@ def parser() -> argparse.ArgumentParser:
         "at least 1)",
     )
     p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
+    daemon = p.add_argument_group("with reachd running (it owns the hardware)")
+    daemon.add_argument("--detach", action="store_true", help="submit, do not follow")
+    daemon.add_argument(
+        "--attach", nargs="?", type=int, const=0, metavar="JOB",
+        help="follow a job again (the current one by default)",
+    )
+    daemon.add_argument("--status", action="store_true", help="the daemon's state")
+    daemon.add_argument("--queue", action="store_true", help="its jobs")
+    daemon.add_argument("--cancel", type=int, metavar="JOB", help="drop or stop a job")
+    daemon.add_argument("--abort", action="store_true", help="stop the run now, go safe")
+    daemon.add_argument("--resume", action="store_true", help="run the queue again")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on standard error")
     p.add_argument("-v", "--verbose", action="store_true", help="log every action")
     add_version(p)
@@ -102,7 +120,27 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         site = simulated_site(settings) if args.sim else load_site(find_site(args.site))
-        session = RunSession.prepare(args.schedule, site, _clock(site), args.out)
+    except ReceiverError as err:
+        print(f"reach-run: {err}", file=sys.stderr)
+        return 2
+    control = None if args.sim else socket_path(site.daemon.runtime_directory())
+    if control is not None and not daemon_answers(control):
+        control = None
+    steering = _steering(args)
+    if steering is not None:
+        if control is None:
+            where = socket_path(site.daemon.runtime_directory())
+            print(f"reach-run: no daemon answers at {where}", file=sys.stderr)
+            return 1
+        with DaemonClient(control) as client:
+            if steering == "attach":
+                return remote.follow(client, args.attach or None)
+            return remote.steer(client, steering, **({"job": args.cancel} if args.cancel else {}))
+    if args.schedule is None:
+        print("reach-run: give a schedule (or --attach, --status, ...)", file=sys.stderr)
+        return 2
+    try:
+        session = RunSession.prepare(args.schedule, site, site.clock(), args.out)
     except ScheduleError as err:
         print(f"reach-run: {args.schedule} is not valid; nothing was run:", file=sys.stderr)
         print(str(err), file=sys.stderr)
@@ -119,7 +157,16 @@ def run_main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.validate:
         return 0
+    if control is not None:
+        with DaemonClient(control) as client:
+            return remote.submit(client, session.schedule, str(args.schedule), args.detach)
     with contextlib.ExitStack() as stack:
+        if not args.sim:
+            try:
+                stack.enter_context(_owning_the_hardware(site))
+            except HardwareBusy as err:
+                print(f"reach-run: {err}", file=sys.stderr)
+                return 1
         # First in, last out: signals stay handled until the simulator has stopped too.
         stack.enter_context(_stopping_on_signals(session))
         sim: SimulatedReceiver | None = None
@@ -142,15 +189,30 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _clock(site: SiteConfig) -> Clock:
-    """The wall clock, or a ``reach-sim``'s shared compressed clock."""
-    if site.simulation:  # a reach-sim in another process: share its simulated time
-        return CompressedClock(
-            site.simulation["compression"],
-            site.simulation["start"],
-            site.simulation["monotonic_origin"],
-        )
-    return SystemClock()
+def _steering(args: argparse.Namespace) -> str | None:
+    """The daemon request asked for, if any."""
+    if args.attach is not None:
+        return "attach"
+    for op in ("status", "queue", "abort", "resume"):
+        if getattr(args, op):
+            return op
+    return "cancel" if args.cancel is not None else None
+
+
+@contextlib.contextmanager
+def _owning_the_hardware(site: SiteConfig) -> Iterator[None]:
+    """The hardware lock the daemon takes too; a warning where it cannot be made."""
+    lock = HardwareLock(site.daemon.state_directory(), "reach-run")
+    try:
+        lock.acquire()
+    except PermissionError as err:
+        log.warning("no hardware lock (%s): make sure no daemon runs", err)
+        yield
+        return
+    try:
+        yield
+    finally:
+        lock.release()
 
 
 def _metadata(

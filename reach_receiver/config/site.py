@@ -14,6 +14,7 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
     thermocouples: {hot: 2}                 # source -> TC-08 port, changes to table 2.2
+    daemon: {resume: true, timers: [...]}   # reachd: reach_receiver.config.daemon
 
 ``reach-sim`` prints one of these with the simulated instruments' addresses and a
 ``simulation`` section (its compressed clock), which ``reach-run`` then shares.
@@ -33,6 +34,7 @@ from typing import Any
 
 import yaml
 
+from reach_receiver.clock import Clock, CompressedClock, SystemClock
 from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.layout import (
     REACH_SOURCES,
@@ -41,6 +43,7 @@ from reach_receiver.frontend.layout import (
     SourcePosition,
 )
 
+from .daemon import DAEMON_KEYS, DaemonSettings, read_daemon
 from .fields import REQUIRED, Fields, closest, type_name
 from .settings import DEVICE_SCHEMAS, DeviceSettings, keys_of, read_settings
 from .yaml_lines import LineDict, Problem, ProblemsError, load_yaml, with_lines
@@ -58,6 +61,7 @@ SECTIONS = (
     "references",
     "sources",
     "thermocouples",
+    "daemon",
     "simulation",
 )
 _PLACE_KEYS = ("name", "longitude_deg", "latitude_deg")
@@ -86,7 +90,18 @@ class SiteConfig:
     simulation: Mapping[str, float] = field(default_factory=dict)
     sources: Mapping[str, SourcePosition] = field(default_factory=lambda: dict(REACH_SOURCES))
     thermocouples: Mapping[str, int] = field(default_factory=lambda: dict(SOURCE_THERMOCOUPLE))
+    daemon: DaemonSettings = field(default_factory=DaemonSettings)
     source: str = "<memory>"
+
+    def clock(self) -> Clock:
+        """The clock the site runs on: a ``reach-sim``'s shared compressed clock, or the wall's."""
+        if self.simulation:
+            return CompressedClock(
+                self.simulation["compression"],
+                self.simulation["start"],
+                self.simulation["monotonic_origin"],
+            )
+        return SystemClock()
 
     def to_yaml(self) -> str:
         """The site file text that reproduces this configuration."""
@@ -116,6 +131,8 @@ class SiteConfig:
         ports = {k: v for k, v in self.thermocouples.items() if SOURCE_THERMOCOUPLE.get(k) != v}
         if ports:
             document["thermocouples"] = ports
+        if self.daemon != DaemonSettings():
+            document["daemon"] = _daemon_yaml(self.daemon)
         return yaml.safe_dump(document, sort_keys=False)
 
 
@@ -174,6 +191,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         simulation.report("<clock>", f"needs all of {', '.join(_SIMULATION_KEYS)}: {missing}")
     sources = _sources(reader)
     thermocouples = _thermocouples(reader)
+    daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), source, reader.problems)
     if reader.problems or devices is None or band is None:
         raise SiteError(sorted(dict.fromkeys(reader.problems), key=lambda p: p.line))
     return SiteConfig(
@@ -186,6 +204,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         simulation=clock,
         sources=sources,
         thermocouples=thermocouples,
+        daemon=daemon,
         source=source,
     )
 
@@ -305,6 +324,26 @@ def _thermocouples(reader: _Reader) -> dict[str, int]:
         else:
             ports[str(name)] = port
     return ports
+
+
+def _daemon_yaml(daemon: DaemonSettings) -> dict[str, Any]:
+    out: dict[str, Any] = {"resume": daemon.resume}
+    if daemon.runtime_dir is not None:
+        out["runtime_dir"] = str(daemon.runtime_dir)
+    if daemon.state_dir is not None:
+        out["state_dir"] = str(daemon.state_dir)
+    out["missed"] = {"policy": daemon.missed_policy, "window_s": daemon.missed_window_s}
+    if daemon.timers:
+        out["timers"] = [
+            {
+                "name": t.name,
+                "schedule": str(t.schedule),
+                **({"at_lst_h": t.at_lst_h} if t.at_lst_h is not None else {}),
+                **({"at_utc": t.at_utc} if t.at_utc is not None else {}),
+            }
+            for t in daemon.timers
+        ]
+    return out
 
 
 def _position_yaml(position: SourcePosition) -> dict[str, int]:

@@ -25,7 +25,7 @@ lists them all, one ``file:line: key: message`` per line, and no schedule is ret
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -56,11 +56,21 @@ class ScheduleError(ProblemsError):
     """
 
 
+def read_file(path: Path) -> str:
+    """A schedule file's text (UTF-8)."""
+    return path.read_text(encoding="utf-8")
+
+
+#: How included files are read: from disk, or from texts a client sent with its schedule.
+Reader = Callable[[Path], str]
+
+
 @dataclass
 class _Sources:
     """Files read so far, and the definitions they made."""
 
     problems: list[Problem]
+    read: Reader = read_file
     texts: dict[str, str] = field(default_factory=dict)
     variables: dict[str, Defined] = field(default_factory=dict)
     blocks: dict[str, Block] = field(default_factory=dict)
@@ -112,7 +122,7 @@ class _Sources:
                 self.problems.append(Problem(file, line, key, f"include cycle: {chain}"))
                 continue
             try:
-                text = path.read_text(encoding="utf-8")
+                text = self.read(path)
             except (OSError, UnicodeDecodeError, ValueError) as err:
                 message = f"cannot read {path}: {getattr(err, 'strerror', None) or err}"
                 self.problems.append(Problem(file, line, key, message))
@@ -199,6 +209,7 @@ def compile_text(
     kinds: KindRegistry,
     site: SiteConfig | None = None,
     start_utc: datetime | None = None,
+    read: Reader = read_file,
 ) -> s.Schedule:
     """Compile a schedule given as text.
 
@@ -217,6 +228,9 @@ def compile_text(
         timing checked as a lower bound (spectra taking only their seconds).
     start_utc
         When the schedule will start, for the timing checks; now by default.
+    read
+        Reads an included file (from disk by default; a daemon compiling what a client
+        sent reads the texts it was sent).
 
     Returns
     -------
@@ -229,7 +243,7 @@ def compile_text(
         With every problem found, when there is any.
     """
     problems: list[Problem] = []
-    sources = _Sources(problems)
+    sources = _Sources(problems, read)
     document = sources.add(file, text, ())
     if document is None:
         raise ScheduleError(_order(problems, list(sources.texts)))

@@ -1,0 +1,170 @@
+"""``reachd``: the receiver daemon in the foreground (systemd ``Type=notify``), or its checks.
+
+::
+
+    reachd --site /etc/reach/site.yaml        # the service (deploy/reachd.service)
+    reachd --check --site /etc/reach/site.yaml
+    reachd --sim --state-dir DIR --runtime-dir DIR --site-out sim-site.yaml
+
+With ``--sim`` it owns a simulated receiver in the same process (the devices of the
+simulator, the rest of ``--site`` when given: timers, policies); ``--site-out`` writes a
+site file through which ``reach-run`` finds the daemon and submits to it. SIGTERM,
+SIGHUP and SIGINT stop it: the current run stops cooperatively (the front-end safe, the
+run file closed with the reason), then the daemon exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+
+from reach_receiver.clock import Clock, SystemClock
+from reach_receiver.config.daemon import DaemonSettings
+from reach_receiver.config.site import SiteConfig, find_site, load_site
+from reach_receiver.daemon import doctor
+from reach_receiver.daemon.doctor import Check, failed, format_checks, run_checks
+from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
+from reach_receiver.daemon.service import Daemon, Directories
+from reach_receiver.errors import ReceiverError
+from reach_receiver.sim.receiver import (
+    DEFAULT_COMPRESSION,
+    SimulatedReceiver,
+    SimulationSettings,
+    spectrum_period_for,
+)
+
+from .logs import add_version, configure_logging
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
+
+
+def parser() -> argparse.ArgumentParser:
+    """The command line of ``reachd``."""
+    p = argparse.ArgumentParser(
+        prog="reachd",
+        description="The REACH receiver daemon: runs schedules from its queue and timers, "
+        "answers its control socket, recovers from crashes.",
+    )
+    p.add_argument("--site", type=Path, help="site file ($REACH_SITE, /etc/reach/site.yaml)")
+    p.add_argument("--sim", action="store_true", help="own a simulated receiver (dry runs)")
+    p.add_argument("--check", action="store_true", help="check the installation and exit")
+    p.add_argument("--runtime-dir", type=Path, help="control socket (default: the site's)")
+    p.add_argument("--state-dir", type=Path, help="queue, lock and runs (default: the site's)")
+    p.add_argument("--site-out", type=Path, help="--sim: write the site file clients use here")
+    p.add_argument("--compression", type=float, default=DEFAULT_COMPRESSION,
+                   help=f"--sim: simulated seconds per real second ({DEFAULT_COMPRESSION:g})")
+    p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
+    p.add_argument("-v", "--verbose", action="store_true", help="log at INFO on standard error")
+    add_version(p)
+    return p
+
+
+def reachd_main(argv: Sequence[str] | None = None) -> int:
+    """``reachd``: exit 0 after a clean stop, 1 when it cannot start, 2 for bad input."""
+    args = parser().parse_args(argv)
+    configure_logging(args.verbose)
+    try:
+        base = load_site(find_site(args.site)) if (args.site or not args.sim) else None
+    except ReceiverError as err:
+        print(f"reachd: {err}", file=sys.stderr)
+        return 2
+    if args.check:
+        if base is None:
+            print("reachd: --check needs a site file", file=sys.stderr)
+            return 2
+        return _check(base, args)
+    if args.sim:
+        settings = SimulationSettings(
+            compression=args.compression,
+            spectrum_period_s=spectrum_period_for(args.compression),
+            seed=args.seed,
+        )
+        with SimulatedReceiver(settings) as sim:
+            site = _with_sim(base, sim.site(), args)
+            if args.site_out is not None:
+                _write(args.site_out, site.to_yaml())
+            return _serve(site, sim.clock, args)
+    assert base is not None
+    return _serve(_with_dirs(base, args), base.clock(), args)
+
+
+def _with_dirs(site: SiteConfig, args: argparse.Namespace) -> SiteConfig:
+    daemon = site.daemon
+    if args.runtime_dir is not None:
+        daemon = dataclasses.replace(daemon, runtime_dir=args.runtime_dir.resolve())
+    if args.state_dir is not None:
+        daemon = dataclasses.replace(daemon, state_dir=args.state_dir.resolve())
+    return dataclasses.replace(site, daemon=daemon)
+
+
+def _with_sim(base: SiteConfig | None, sim: SiteConfig, args: argparse.Namespace) -> SiteConfig:
+    """The simulator's devices; the rest (timers, policies, tables) from ``--site``."""
+    site = sim if base is None else dataclasses.replace(
+        base, devices=sim.devices, references=sim.references, simulation=sim.simulation,
+        longitude_deg=sim.longitude_deg, latitude_deg=sim.latitude_deg, source=base.source,
+    )
+    if base is None:
+        site = dataclasses.replace(site, daemon=DaemonSettings())
+    return _with_dirs(site, args)
+
+
+def _write(path: Path, text: str) -> None:
+    partial = path.with_name(path.name + ".partial")
+    partial.write_text(text)
+    os.replace(partial, path)
+
+
+def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
+    dirs = Directories(site.daemon.runtime_directory(), site.daemon.state_directory())
+    daemon = Daemon(site, clock, dirs)
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        del frame
+        daemon.halt(f"signal {signal.Signals(signum).name}")
+
+    for handled in STOP_SIGNALS:
+        signal.signal(handled, on_signal)
+    try:
+        daemon.start()
+    except (ReceiverError, OSError) as err:
+        print(f"reachd: cannot start: {err}", file=sys.stderr)
+        daemon.close()
+        return 1
+    print(f"reachd: serving {dirs.runtime / 'control.sock'} ({daemon.machine.state})", flush=True)
+    try:
+        daemon.serve()
+    finally:
+        daemon.close()
+    return 0
+
+
+def _check(site: SiteConfig, args: argparse.Namespace) -> int:
+    """The installation's checks; the devices only when no daemon owns them."""
+    site = _with_dirs(site, args)
+    state, runtime = site.daemon.state_directory(), site.daemon.runtime_directory()
+    lock = HardwareLock(state, "reachd --check")
+    try:
+        lock.acquire()
+    except (HardwareBusy, OSError) as err:
+        checks = [Check("devices", "warn", f"not probed: {err}")]
+        checks += doctor.device_path_checks(site)
+        checks.append(doctor.check_clock())
+        data = state / "runs"
+        checks.append(doctor.check_disk(data, doctor.DEFAULT_MIN_FREE_BYTES,
+                                        doctor.run_bytes_per_hour(site)))
+        checks.append(doctor.check_directory("data dir", data, private=True))
+        checks.append(doctor.check_directory("runtime dir", runtime, private=False))
+    else:
+        try:
+            checks = run_checks(site, clock=SystemClock(), data_dir=state / "runs",
+                                runtime_dir=runtime)
+        finally:
+            lock.release()
+    print(format_checks(checks))
+    return 1 if failed(checks) else 0

@@ -1,0 +1,97 @@
+"""``reach-run`` as a client of the daemon: submit, follow, detach, re-attach, steer.
+
+When ``reachd`` owns the hardware (its control socket answers in the site's runtime
+directory), ``reach-run schedule.yaml`` checks the schedule locally, sends it with every
+file it includes, prints the job's progress as it comes, and exits with the run's
+outcome (0 completed, 1 otherwise). Ctrl-C detaches: the run goes on in the daemon and
+``reach-run --attach [JOB]`` follows it again. ``--detach`` submits and returns at once.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+from reach_receiver.daemon.client import DaemonClient
+from reach_receiver.daemon.protocol import ControlError
+from reach_receiver.schedule.steps import Schedule
+from reach_receiver.schedule.timing import hms
+
+
+def submit(client: DaemonClient, schedule: Schedule, path: str, detach: bool) -> int:
+    """Send a compiled schedule's files; follow the job unless ``detach``."""
+    try:
+        answer = client.request("submit", schedule=path, files=dict(schedule.files))
+    except ControlError as err:
+        print(f"reach-run: the daemon refused {path}: {err}", file=sys.stderr)
+        for problem in err.problems:
+            print(problem, file=sys.stderr)
+        return 2
+    job = answer["job"]
+    print(f"submitted to reachd: job {job['id']} ({job['name']})", flush=True)
+    if detach:
+        print(f"follow it with: reach-run --attach {job['id']}")
+        return 0
+    return follow(client, int(job["id"]))
+
+
+def follow(client: DaemonClient, job: int | None) -> int:
+    """Print a job's events until it ends (exit 0 if it completed); Ctrl-C detaches."""
+    state = "unknown"
+    which = job
+    try:
+        for message in client.follow(job):
+            event = message["event"]
+            which = event.get("job", which)
+            _print(event)
+            if message.get("end"):
+                state = str(event.get("state"))
+    except KeyboardInterrupt:
+        print(f"\ndetached from job {which}; it goes on. Again: reach-run --attach {which}")
+        return 0
+    except ControlError as err:
+        print(f"reach-run: {err}", file=sys.stderr)
+        return 1
+    return 0 if state == "completed" else 1
+
+
+def _print(event: dict[str, Any]) -> None:
+    kind = event["kind"]
+    if kind == "started":
+        print(f"run directory: {event['run']}", file=sys.stderr, flush=True)
+    elif kind == "step":
+        left = f", about {hms(event['left_s'])} left" if event.get("left_s") is not None else ""
+        print(
+            f"[{event['index']:>3}/{event['total']}]{left} | {event['text']}  ({event['where']})",
+            file=sys.stderr,
+            flush=True,
+        )
+    elif kind == "log" and event["level"] in ("WARNING", "ERROR", "CRITICAL"):
+        print(f"  {event['level'].lower()}: {event['message']}", file=sys.stderr, flush=True)
+    elif kind == "end":
+        reason = f": {event['reason']}" if event.get("reason") else ""
+        print(f"job {event.get('job')} {event['state']}{reason}")
+        if event.get("run"):
+            print(f"run directory: {event['run']}")
+
+
+def steer(client: DaemonClient, op: str, **fields: Any) -> int:
+    """One request (status, queue, cancel, abort, resume), its reply printed."""
+    try:
+        answer = client.request(op, **fields)
+    except ControlError as err:
+        print(f"reach-run: {err}", file=sys.stderr)
+        return 1
+    if op == "status":
+        print(answer["status"])
+        if answer["queue"]:
+            print(f"queued: {', '.join(map(str, answer['queue']))}")
+        for name, at in sorted(answer.get("timers", {}).items()):
+            print(f"timer {name}: next at {at:.0f} (Unix s)")
+    elif op == "queue":
+        for job in answer["jobs"]:
+            line = f"{job['id']:>5} {job['state']:<11} {job['name']}  {job['origin']}"
+            print(f"{line}  {job['reason']}".rstrip())
+    else:
+        print(f"{op}: done" + (f" (job {answer['job']['id']})" if answer.get("job") else ""))
+    return 0

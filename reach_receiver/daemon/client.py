@@ -1,0 +1,123 @@
+"""A client of the daemon's control socket (:mod:`.protocol`), as ``reach-run`` uses it."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from .control import SOCKET_FILE
+from .protocol import MAX_LINE, ControlError, decode, encode
+
+
+def socket_path(runtime_dir: Path) -> Path:
+    """Where the daemon of a runtime directory listens."""
+    return Path(runtime_dir) / SOCKET_FILE
+
+
+def daemon_answers(path: Path, timeout_s: float = 2.0) -> bool:
+    """Whether a daemon listens on ``path`` (a socket file alone is not enough)."""
+    if not path.exists():
+        return False
+    try:
+        with DaemonClient(path, timeout_s) as client:
+            client.request("status")
+    except (OSError, ControlError):
+        return False
+    return True
+
+
+class DaemonClient:
+    """One connection to the daemon; requests in turn, replies as dicts.
+
+    Raises
+    ------
+    ControlError
+        For a refusal (with its ``problems``), or a reply that breaks the protocol.
+    OSError
+        When the daemon cannot be reached (``PermissionError``: not in its group).
+    """
+
+    def __init__(self, path: Path, timeout_s: float = 10.0) -> None:
+        self.path = Path(path)
+        self.timeout_s = timeout_s
+        self._socket: socket.socket | None = None
+        self._file: BinaryIO | None = None
+        self._lines: Iterator[bytes] | None = None
+
+    def __enter__(self) -> DaemonClient:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def connect(self) -> None:
+        """Open the connection."""
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+        sock.settimeout(self.timeout_s)
+        try:
+            sock.connect(str(self.path))
+        except OSError:
+            sock.close()
+            raise
+        self._socket = sock
+        self._file = sock.makefile("rb")
+        self._lines = iter(self._file)
+
+    def close(self) -> None:
+        """Close the connection (a followed run goes on)."""
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        if self._socket is not None:
+            self._socket.close()
+            self._socket = None
+
+    def _send(self, op: str, fields: dict[str, Any]) -> None:
+        if self._socket is None:
+            self.connect()
+        assert self._socket is not None
+        self._socket.sendall(encode({"op": op, **fields}))
+
+    def _receive(self) -> dict[str, Any]:
+        assert self._lines is not None
+        try:
+            line = next(self._lines)
+        except StopIteration:
+            raise ControlError("the daemon closed the connection") from None
+        if len(line) > MAX_LINE:
+            raise ControlError("reply too long")
+        return decode(line)
+
+    def request(self, op: str, **fields: Any) -> dict[str, Any]:
+        """Send one request; its reply, or :class:`ControlError` for a refusal."""
+        self._send(op, fields)
+        answer = self._receive()
+        if not answer.get("ok"):
+            raise ControlError(str(answer.get("error", "refused")), answer.get("problems"))
+        return answer
+
+    def follow(
+        self, job: int | None = None, timeout_s: float | None = None
+    ) -> Iterator[dict[str, Any]]:
+        """The events of a job as they come, up to and including its end.
+
+        ``timeout_s`` bounds the wait for each event (``None``: wait as long as the run).
+        """
+        fields: dict[str, Any] = {} if job is None else {"job": job}
+        self._send("follow", fields)
+        assert self._socket is not None
+        self._socket.settimeout(timeout_s)
+        try:
+            while True:
+                message = self._receive()
+                if not message.get("ok"):
+                    raise ControlError(str(message.get("error", "refused")))
+                yield message
+                if message.get("end"):
+                    return
+        finally:
+            if self._socket is not None:
+                self._socket.settimeout(self.timeout_s)

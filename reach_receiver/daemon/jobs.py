@@ -1,0 +1,141 @@
+"""Jobs: schedules submitted to the daemon, queued, run, and remembered across restarts.
+
+A job holds the schedule as submitted (its path as the client named it, and the texts of
+it and every file it includes), so that it runs as validated even if the files change
+or are not readable by the daemon's user. The queue is one JSON file in the state
+directory, rewritten atomically (temporary file, fsync, rename) on every change, so a
+crash or a power cut finds the queue as it was: queued jobs run after the restart, and a
+job that was running is found and marked interrupted by recovery.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+import threading
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+JobState = Literal["queued", "running", "completed", "failed", "interrupted", "cancelled"]
+ENDED: tuple[JobState, ...] = ("completed", "failed", "interrupted", "cancelled")
+#: Ended jobs kept in the queue file for ``queue`` replies.
+KEEP_ENDED = 50
+
+
+@dataclass
+class Job:
+    """One schedule to run, and what became of it.
+
+    ``resumes`` lists the run files of earlier, interrupted runs of the same schedule that
+    this job continues (oldest first).
+    """
+
+    id: int
+    name: str
+    schedule: str
+    files: dict[str, str]
+    origin: str
+    submitted: float
+    state: JobState = "queued"
+    started: float | None = None
+    ended: float | None = None
+    run: str | None = None
+    reason: str = ""
+    resumes: list[str] = field(default_factory=list)
+
+    def public(self) -> dict[str, Any]:
+        """The job as the control protocol shows it (without the schedule's texts)."""
+        out = asdict(self)
+        del out["files"]
+        return out
+
+
+class JobQueue:
+    """The daemon's jobs, persisted in ``path`` (thread-safe)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._lock = threading.RLock()
+        self._jobs: list[Job] = []
+        self._next = 1
+        if self.path.exists():
+            data = json.loads(self.path.read_text())
+            self._jobs = [Job(**job) for job in data["jobs"]]
+            self._next = int(data["next_id"])
+
+    def add(
+        self,
+        name: str,
+        schedule: str,
+        files: dict[str, str],
+        origin: str,
+        submitted: float,
+        *,
+        resumes: list[str] | None = None,
+        first: bool = False,
+    ) -> Job:
+        """Queue a new job (at the front with ``first``)."""
+        with self._lock:
+            job = Job(self._next, name, schedule, files, origin, submitted, resumes=resumes or [])
+            self._next += 1
+            if first:
+                self._jobs.insert(0, job)
+            else:
+                self._jobs.append(job)
+            self.save()
+            return job
+
+    def get(self, job_id: int) -> Job | None:
+        """A job by id."""
+        with self._lock:
+            return next((j for j in self._jobs if j.id == job_id), None)
+
+    def jobs(self, *states: JobState) -> list[Job]:
+        """The jobs (in one of ``states``), in queue order."""
+        with self._lock:
+            return [j for j in self._jobs if not states or j.state in states]
+
+    def next_queued(self) -> Job | None:
+        """The job to run next."""
+        queued = self.jobs("queued")
+        return queued[0] if queued else None
+
+    def update(self, job: Job, **changes: Any) -> Job:
+        """Change a job and save the queue."""
+        with self._lock:
+            for key, value in changes.items():
+                setattr(job, key, value)
+            self.save()
+            return job
+
+    def save(self) -> None:
+        """Write the queue atomically (ended jobs beyond the last few are forgotten)."""
+        with self._lock:
+            ended = [j for j in self._jobs if j.state in ENDED]
+            for old in ended[:-KEEP_ENDED]:
+                self._jobs.remove(old)
+            text = json.dumps({"next_id": self._next, "jobs": [asdict(j) for j in self._jobs]})
+            _atomic_write(self.path, text)
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+        directory = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(directory)
+        finally:
+            os.close(directory)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
