@@ -40,6 +40,7 @@ from reach_receiver.run.session import RunFailed, RunSession
 from reach_receiver.run.steps import STANDARD_KINDS, Observe
 from reach_receiver.schedule.compile import ScheduleError, compile_text
 from reach_receiver.schedule.kinds import KindRegistry
+from reach_receiver.schedule.lst import apparent_lst_h
 from reach_receiver.schedule.steps import Schedule, Step
 from reach_receiver.store import RUN_FILE, read_run_file
 
@@ -150,6 +151,8 @@ class Daemon:
         """Lock, recover, go safe, catch up with the timers, serve the socket, be ready."""
         self.dirs.create()
         self.lock.acquire()
+        # The first sidereal time costs a second (astropy's tables): not in a first run.
+        apparent_lst_h([self.clock.now()], self.site.longitude_deg)
         self._recover()
         try:
             self._go_safe()

@@ -1,0 +1,212 @@
+"""reachd against a reach-sim in another process: killed and restarted, timers missed.
+
+The simulated receiver runs as its own process (``reach-sim``), as the hardware does, so
+it outlives the daemon: SIGKILL the daemon at random moments of a run, start it again,
+and the front-end, the run files and the queue must be as the issue says.
+"""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pytest
+import yaml
+
+from reach_receiver.cli import run_main
+from reach_receiver.daemon.client import DaemonClient, daemon_answers
+from reach_receiver.schedule.lst import local_sidereal_time_h
+from reach_receiver.store import read_run_file
+from reach_receiver.store.parts import list_parts
+
+ENTRY = "from reach_receiver.cli import {main}; import sys; sys.exit({main}(sys.argv[1:]))"
+SCHEDULE = """\
+schedule: resumable
+steps:
+  - initialise: {rails: [12v, 24v, 6v]}
+  - temperatures: {period_s: 30}
+  - dicke: {sources: [cold, hot, r25, r100, c2r27, c2r36], seconds: 600}
+  - vna_calibrate
+  - s11: {targets: [cold, hot, r25, lna]}
+  - safe
+"""
+EXPECTED = {("dicke", s) for s in ("cold", "hot", "r25", "r100", "c2r27", "c2r36")} | {
+    ("s11", t) for t in ("cold", "hot", "r25", "lna")
+}
+SAFE_PINS = ("ns=0", "6v=0", "12v=0", "ms1=0", "ms2=0", "ms3=0", "ms4=0", "mts=lna")
+
+
+def python(main, *args, **options):
+    return subprocess.Popen(
+        [sys.executable, "-c", ENTRY.format(main=main), *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **options,
+    )
+
+
+@pytest.fixture(scope="module")
+def reach_sim(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sim")
+    site = root / "sim.yaml"
+    process = python("sim_main", "--site-out", str(site), "--compression", "3000")
+    deadline = time.monotonic() + 60
+    while not site.exists():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    yield yaml.safe_load(site.read_text())
+    process.send_signal(signal.SIGTERM)
+    process.communicate(timeout=30)
+
+
+def site_file(root: Path, sim: dict, **daemon) -> Path:
+    document = {**sim, "daemon": {"state_dir": str(root / "state"),
+                                  "runtime_dir": str(root / "run"), **daemon}}
+    path = root / "site.yaml"
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+def start_reachd(site: Path) -> subprocess.Popen:
+    process = python("reachd_main", "--site", str(site), "-v")
+    runtime = Path(yaml.safe_load(site.read_text())["daemon"]["runtime_dir"])
+    deadline = time.monotonic() + 60
+    while not daemon_answers(runtime / "control.sock"):  # a killed one leaves its file
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    return process
+
+
+def finish(process: subprocess.Popen, sig=signal.SIGTERM) -> tuple[int, str]:
+    if process.poll() is None:
+        process.send_signal(sig)
+    _, err = process.communicate(timeout=60)
+    return process.returncode, err
+
+
+def jobs(root: Path) -> list[dict]:
+    with DaemonClient(root / "run" / "control.sock") as client:
+        return client.request("queue")["jobs"]
+
+
+def wait(predicate, timeout_s=90.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        found = predicate()
+        if found:
+            return found
+        time.sleep(0.05)
+    raise AssertionError("timed out")
+
+
+KILLS = [(1, 0.0), (3, 0.13), (6, 0.05)]  # (Dicke cycles stored, extra seconds) before SIGKILL
+
+
+@pytest.mark.parametrize(("cycles", "extra_s"), KILLS)
+def test_a_killed_daemon_recovers_and_the_schedule_carries_on(reach_sim, tmp_path, cycles,
+                                                              extra_s):
+    schedule = tmp_path / "resumable.yaml"
+    schedule.write_text(SCHEDULE)
+    site = site_file(tmp_path, reach_sim, resume=True)
+    reachd = start_reachd(site)
+    assert run_main(["--site", str(site), str(schedule), "--detach"]) == 0
+    runs = tmp_path / "state" / "runs"
+
+    def stored():
+        directories = list(runs.iterdir()) if runs.exists() else []
+        parts = list_parts(directories[0]) if directories else []
+        return parts if sum(p.kind == "dicke" for p in parts) >= cycles else None
+
+    wait(stored)
+    time.sleep(extra_s)
+    (first_run,) = list(runs.iterdir())
+    before = {(p.sequence, p.kind, p.name) for p in list_parts(first_run)}
+    os.kill(reachd.pid, signal.SIGKILL)
+    reachd.wait(timeout=10)
+    reachd.communicate()
+
+    again = start_reachd(site)
+    done = wait(lambda: [j for j in jobs(tmp_path) if j["state"] in ("completed", "failed")])
+    code, log = finish(again)
+    assert code == 0
+    # The restarted daemon put the front-end in its safe state before anything else.
+    safe_line = next(line for line in log.splitlines() if "front-end safe:" in line)
+    for pin in SAFE_PINS:
+        assert pin in safe_line
+    # The interrupted run: closed by recovery, every measurement stored before the kill.
+    interrupted = read_run_file(first_run / "run.h5")
+    assert interrupted.status == "interrupted"
+    assert "the daemon stopped during the run" in interrupted.reason
+    kept = {(m.sequence, m.kind, m.name) for m in interrupted.measurements}
+    assert {b for b in before if b[1] not in ("run", "status")} <= kept
+    # The continuation: completed, every measurement of the schedule exactly once.
+    (resumed,) = done
+    assert resumed["state"] == "completed", resumed["reason"]
+    assert resumed["origin"] == "resumption of job 1"
+    contents = read_run_file(Path(resumed["run"]) / "run.h5")
+    measured = [(m.kind, m.name) for m in contents.measurements if m.kind in ("dicke", "s11")]
+    assert sorted(measured) == sorted(EXPECTED)
+    carried = [m for m in contents.measurements if "carried_from" in m.attrs]
+    old = [m for m in interrupted.measurements if m.kind in ("dicke", "s11")]
+    assert len([m for m in carried if m.kind in ("dicke", "s11")]) == len(old)
+
+
+def lst_in(minutes: float, clock_start: float) -> float:
+    now = datetime.fromtimestamp(clock_start + minutes * 60, tz=timezone.utc)
+    return round(local_sidereal_time_h(now, 21.52), 6) % 24
+
+
+def simulated_now(sim: dict) -> float:
+    clock = sim["simulation"]
+    return clock["start"] + clock["compression"] * (time.monotonic() - clock["monotonic_origin"])
+
+
+# A daemon's start takes seconds of real time, hours of simulated time at 3000x: the
+# "late" window is wide enough for that, the "skip" one narrower than the 25 minutes.
+@pytest.mark.parametrize(("window_s", "expected"), [(12 * 3600.0, "late"), (600.0, "skipped")])
+def test_a_trigger_missed_while_the_daemon_was_down(reach_sim, tmp_path, window_s, expected):
+    schedule = tmp_path / "timed.yaml"
+    schedule.write_text("schedule: timed\nsteps:\n  - initialise: {rails: [12v, 24v]}\n  - safe\n")
+    first = start_reachd(site_file(tmp_path, reach_sim))  # remembers it was up, no timers
+    assert finish(first)[0] == 0
+    # While it is down, the sky passes the timer's LST: 5 simulated minutes after it
+    # stopped; it starts again 20 minutes after that (0.5 s of real time at 3000x).
+    stopped = simulated_now(reach_sim)
+    at = lst_in(5, stopped)
+    wait(lambda: simulated_now(reach_sim) >= stopped + 25 * 60)
+    timers = [{"name": "night", "schedule": str(schedule), "at_lst_h": at}]
+    site = site_file(tmp_path, reach_sim, timers=timers,
+                     missed={"policy": "late", "window_s": window_s})
+    second = start_reachd(site)
+    try:
+        if expected == "late":
+            (job,) = wait(lambda: jobs(tmp_path))
+            assert job["origin"] == "timer night (late)"
+        else:
+            time.sleep(1.0)
+            assert jobs(tmp_path) == []
+    finally:
+        code, log = finish(second)
+    assert code == 0
+    assert ("run late" if expected == "late" else "skipped") in log
+
+
+def test_a_timer_fires_when_its_sidereal_time_comes(reach_sim, tmp_path):
+    schedule = tmp_path / "timed.yaml"
+    schedule.write_text("schedule: timed\nsteps:\n  - initialise: {rails: [12v, 24v]}\n  - safe\n")
+    first = start_reachd(site_file(tmp_path, reach_sim))
+    assert finish(first)[0] == 0
+    # 15 simulated minutes from now: 0.3 s of real time at 3000x.
+    at = lst_in(15, simulated_now(reach_sim))
+    site = site_file(tmp_path, reach_sim, timers=[
+        {"name": "soon", "schedule": str(schedule), "at_lst_h": at}])
+    second = start_reachd(site)
+    try:
+        (job,) = wait(lambda: [j for j in jobs(tmp_path) if j["state"] == "completed"])
+        assert job["origin"] == "timer soon (on time)"
+    finally:
+        assert finish(second)[0] == 0
