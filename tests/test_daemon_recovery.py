@@ -6,7 +6,6 @@ and the front-end, the run files and the queue must be as the issue says.
 """
 
 import os
-import random
 import signal
 import subprocess
 import sys
