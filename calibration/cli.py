@@ -180,7 +180,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         f"{data.n_channels} channels) in {elapsed:.2f} s"
     )
     how = "fixed" if args.orders else f"best of {len(solution.evidence_table)} by evidence"
-    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.orders))} ({how})")
+    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))} ({how})")
+    if solution.models_line():
+        print(f"averaged over models (orders, weight): {solution.models_line()}")
     print(f"log evidence: {post.log_evidence:.3f}")
     print(_noise_line(solution))
     print(f"wrote {args.output}")
@@ -243,7 +245,10 @@ def cmd_summary(args: argparse.Namespace) -> int:
         f"{basis.f_lo_hz / 1e6:.3f}-{basis.f_hi_hz / 1e6:.3f} MHz"
     )
     print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
-    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.orders))}")
+    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))}")
+    if solution.models_line():
+        print(f"averaged over models (orders, weight): {solution.models_line()}")
+        print(f"posterior layout (the models' envelope): {solution.orders}")
     at_ceiling = solution.metadata.get("orders_at_ceiling") or []
     if at_ceiling:
         print(

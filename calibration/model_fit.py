@@ -1,8 +1,13 @@
 """Fit one polynomial model, or choose the orders by evidence, on built normal equations.
 
 Shared by the thesis solver and the radiometric solver: they differ only in how they build
-the :class:`~calibration.normal_equations.NormalEquations` (likelihood) and scale their
-priors.
+the :class:`~calibration.normal_equations.NormalEquations` (likelihood) and in their
+priors. With a fixed :class:`~calibration.conjugate.CoefficientPrior` (the thesis's), one
+model is chosen by a climb over orders; with a
+:class:`~calibration.shrinkage.ShrinkagePrior` (the radiometric solver's default), the
+prior's scale is marginalised, the climb moves parameters jointly, and the posterior is
+the evidence-weighted mixture of the models that carry the weight
+(:mod:`calibration.averaging`), or of the best model's prior scales alone.
 """
 
 from __future__ import annotations
@@ -12,11 +17,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .averaging import mixture_posterior, select_components
 from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior, solve
 from .errors import IllPosedError
 from .normal_equations import NormalEquations
-from .order_search import search_orders
+from .order_search import search_orders, search_orders_jointly
 from .polynomial_model import Orders, as_orders
+from .shrinkage import ShrinkagePrior, log_evidence_scales, marginal_log_evidence
+
+Prior = CoefficientPrior | ShrinkagePrior
 
 
 @dataclass(frozen=True)
@@ -69,18 +78,25 @@ def check_constrained(normal: NormalEquations, orders: Orders, rcond: float = 1e
 def fit(
     normal: NormalEquations,
     choice: OrderChoice,
-    prior: CoefficientPrior,
+    prior: Prior,
     prior_variance_scale: float,
     scale_prior: ScalePrior | None,
     allow_prior_dominated: bool = False,
     starts: Sequence[Orders] = (),
+    average: bool = True,
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """Posterior of the chosen (or evidence-best) model and the evidence table.
 
     ``prior_variance_scale`` divides the kelvin prior variances into ``V_0`` units (the
     NIG prior's coefficient covariance is ``s^2 V_0``). Fixed orders that the data leave
-    unconstrained raise :class:`IllPosedError` unless ``allow_prior_dominated``.
+    unconstrained raise :class:`IllPosedError` unless ``allow_prior_dominated``. With a
+    :class:`ShrinkagePrior`, ``average`` mixes the models that carry the weight; without
+    it, only the best model's prior scales.
     """
+    if isinstance(prior, ShrinkagePrior):
+        return _fit_shrinkage(
+            normal, choice, prior, scale_prior, allow_prior_dominated, starts, average
+        )
 
     def posterior(orders: Orders) -> LinearPosterior:
         mean, var = prior.vectors(orders)
@@ -112,6 +128,43 @@ def fit(
     return posterior(result.best), result.table
 
 
+def _fit_shrinkage(
+    normal: NormalEquations,
+    choice: OrderChoice,
+    prior: ShrinkagePrior,
+    scale_prior: ScalePrior | None,
+    allow_prior_dominated: bool,
+    starts: Sequence[Orders],
+    average: bool,
+) -> tuple[LinearPosterior, dict[Orders, float]]:
+    """:func:`fit` with the prior scale marginalised and the models averaged."""
+    grids: dict[Orders, np.ndarray] = {}
+
+    def log_evidence(orders: Orders) -> float:
+        grids[orders] = log_evidence_scales(normal, orders, prior, scale_prior)
+        return marginal_log_evidence(grids[orders])
+
+    if choice.orders is not None:
+        if not allow_prior_dominated:
+            check_constrained(normal, choice.orders)
+        best = choice.orders
+        table = {best: log_evidence(best)}
+    else:
+        inside = [
+            s for s in starts if all(n <= m for n, m in zip(s, choice.max_orders, strict=True))
+        ]
+        result = search_orders_jointly(
+            log_evidence, choice.min_orders, choice.max_orders,
+            starts=inside or [choice.min_orders], lookahead=choice.lookahead,
+        )
+        best, table = result.best, result.table
+    if not np.isfinite(table[best]):
+        raise IllPosedError("no model between the order limits is constrained by the data")
+    pool = grids if average else {best: grids[best]}
+    components = select_components(pool)
+    return mixture_posterior(normal, components, prior, scale_prior, table[best]), table
+
+
 @dataclass(frozen=True)
 class FitResult:
     """A fit with its evidence table, the normal equations it used and the order limits."""
@@ -130,14 +183,17 @@ class FitResult:
 def fit_extending(
     build: Callable[[Orders], NormalEquations],
     choice: OrderChoice,
-    prior: CoefficientPrior,
+    prior: Prior,
     prior_variance_scale: float,
     scale_prior: ScalePrior | None,
     allow_prior_dominated: bool = False,
+    average: bool = True,
 ) -> FitResult:
     """:func:`fit` on ``build(max_orders)``, raising limits the evidence runs into.
 
     ``build`` makes the normal equations for given largest orders (the solvers' likelihood).
+    With a :class:`ShrinkagePrior` the evidence table is that of the last normal
+    equations alone, so that every entry is computed the same way.
     """
     from .noise_waves import PARAMETERS
 
@@ -154,12 +210,17 @@ def fit_extending(
             scale_prior,
             allow_prior_dominated,
             starts=best,
+            average=average,
         )
-        table.update(part)
-        best = (post.orders,)
+        if isinstance(prior, ShrinkagePrior):
+            table = dict(part)
+        else:
+            table.update(part)
+        chosen = max(part, key=part.__getitem__)
+        best = (chosen,)
         hit = [
             k
-            for k, (n, m) in enumerate(zip(post.orders, largest, strict=True))
+            for k, (n, m) in enumerate(zip(chosen, largest, strict=True))
             if n == m and choice.orders is None
         ]
         grow = [k for k in hit if largest[k] < choice.ceiling]

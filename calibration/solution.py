@@ -107,8 +107,27 @@ class Solution:
 
     @property
     def orders(self) -> Orders:
-        """Number of polynomial terms of each parameter."""
+        """Number of polynomial terms of each parameter in the posterior's layout.
+
+        For a model-averaged posterior this is the envelope of the models mixed; the
+        evidence's own choice is :attr:`best_orders`.
+        """
         return self.posterior.orders
+
+    @property
+    def best_orders(self) -> Orders:
+        """The evidence-best model's orders (the layout's when none is recorded)."""
+        best = self.metadata.get("best_orders")
+        return self.orders if best is None else tuple(int(n) for n in best)  # type: ignore[return-value]
+
+    def models_line(self, limit: int = 4) -> str:
+        """The leading models and their weights, for a summary (empty if not averaged)."""
+        weights = self.metadata.get("model_weights") or []
+        if not self.metadata.get("averaged") or len(weights) < 2:
+            return ""
+        return ", ".join(
+            f"({','.join(map(str, w['orders']))}) {w['weight']:.3f}" for w in weights[:limit]
+        )
 
     @property
     def parameters(self) -> PolynomialParameters:

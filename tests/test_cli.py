@@ -66,7 +66,7 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
 
     assert main(["summary", str(sol), "--run", str(run), "--source", "ant"]) == 0
     text = capsys.readouterr().out
-    orders = ", ".join(map(str, solution.orders))
+    orders = ", ".join(map(str, solution.best_orders))
     assert f"orders (unc, cos, sin, NS, L): {orders}" in text
     for name in ("unc", "cos", "sin", "NS", "L"):
         assert re.search(rf"^\s+{name}: ", text, re.MULTILINE)

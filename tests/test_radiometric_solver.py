@@ -36,7 +36,7 @@ def test_truth_inside_posterior_at_true_orders(run):
 
 def test_evidence_recovers_truth_orders(run):
     sol = solve_radiometric(run.data)
-    assert sol.orders == run.truth.parameters.orders
+    assert sol.best_orders == run.truth.parameters.orders
     assert len(sol.evidence_table) > 20
 
 

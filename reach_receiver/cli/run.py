@@ -274,7 +274,9 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
         f"{len(handover.calibrators)} calibrators, {cycles} Dicke cycles, "
         f"{len(handover.s11)} S11s (recorded in the run file)"
     )
-    print(f"solution: orders {solution.orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
+    print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
+    if solution.models_line():
+        print(f"  averaged over models (orders, weight): {solution.models_line()}")
     print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
     floor, predicted = outcome.floor_k, outcome.predicted_k
     print(

@@ -1,0 +1,140 @@
+"""Bayesian model averaging: the posterior as a mixture over orders and prior scales.
+
+Choosing one model and reporting its posterior ignores that the choice itself is
+uncertain: a term the evidence only half wants is either in, with its full variance, or
+out, with its bias and no variance for it. The posterior predictive that accounts for
+the choice is the evidence-weighted mixture (Hoeting et al. 1999, *Statist. Sci.* 14,
+382, eq. 1)::
+
+    p(c | D) = sum_m  p(c | D, m) Z_m / sum_m' Z_m'
+
+over the models ``m`` that carry the weight: here a model is a pair (orders, prior scale
+``tau`` of :mod:`calibration.shrinkage`), each with a conjugate posterior of its own. The
+components live in coefficient spaces of different sizes; each is embedded in the
+envelope of all their orders (absent terms are exactly zero), where the mixture has
+
+    mean = sum_m w_m mu_m,     cov = sum_m w_m (Sigma_m + mu_m mu_m^T) - mean mean^T
+
+(the law of total variance), so everything downstream of a posterior (calibrated spectra,
+their errors, the parameters at any frequency) sees the model-choice uncertainty.
+:meth:`MixturePosterior.sample` draws from the mixture itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .conjugate import LinearPosterior, ScalePrior, solve
+from .normal_equations import NormalEquations
+from .polynomial_model import Orders, full_indices
+from .shrinkage import ShrinkagePrior
+
+FloatArray = NDArray[np.float64]
+
+#: The mixture keeps the heaviest components up to this share of the total weight...
+MASS = 0.999
+#: ...and at most this many.
+MAX_COMPONENTS = 64
+
+
+@dataclass(frozen=True)
+class MixturePosterior(LinearPosterior):
+    """A :class:`LinearPosterior` whose moments are those of a mixture (module docstring).
+
+    ``orders`` is the envelope of the components' orders; ``components`` hold each
+    component's own posterior (in its own orders) and ``weights`` their normalised weights.
+    """
+
+    components: tuple[LinearPosterior, ...] = ()
+    weights: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` draws from the mixture, shape ``(n, P)`` in the envelope's layout."""
+        which = rng.choice(len(self.components), size=n, p=self.weights)
+        out = np.zeros((n, self.mean.size))
+        for m, component in enumerate(self.components):
+            rows = np.flatnonzero(which == m)
+            if rows.size:
+                idx = full_indices(component.orders, self.orders)
+                out[np.ix_(rows, idx)] = component.sample(rows.size, rng)
+        return out
+
+    def model_weights(self) -> dict[Orders, float]:
+        """The weight of each set of orders (summed over the prior scales)."""
+        totals: dict[Orders, float] = {}
+        for component, weight in zip(self.components, self.weights, strict=True):
+            totals[component.orders] = totals.get(component.orders, 0.0) + float(weight)
+        return dict(sorted(totals.items(), key=lambda item: -item[1]))
+
+
+def select_components(
+    grids: Mapping[Orders, FloatArray], mass: float = MASS, limit: int = MAX_COMPONENTS
+) -> list[tuple[Orders, int, float]]:
+    """The (orders, scale index, weight) that carry ``mass`` of the total evidence.
+
+    ``grids`` maps each evaluated model to its log evidence at every prior scale; the
+    weights are renormalised over the components kept.
+    """
+    models = list(grids)
+    logs = np.stack([grids[m] for m in models])  # (models, scales)
+    finite = np.isfinite(logs)
+    if not finite.any():
+        raise ValueError("no model has a finite evidence")
+    weights = np.where(finite, np.exp(logs - logs[finite].max()), 0.0).ravel()
+    weights /= weights.sum()
+    order = np.argsort(-weights)[:limit]
+    kept = order[: int(np.searchsorted(np.cumsum(weights[order]), mass)) + 1]
+    total = float(weights[kept].sum())
+    n_scales = logs.shape[1]
+    return [
+        (models[i // n_scales], int(i % n_scales), float(weights[i] / total)) for i in kept
+    ]
+
+
+def mixture_posterior(
+    normal: NormalEquations,
+    components: Sequence[tuple[Orders, int, float]],
+    prior: ShrinkagePrior,
+    scale_prior: ScalePrior | None,
+    log_evidence: float,
+) -> MixturePosterior:
+    """The mixture of the components' conjugate posteriors (module docstring)."""
+    posteriors, weights = [], []
+    for orders, g, weight in components:
+        variances = prior.variances(orders)[g]
+        posteriors.append(solve(normal, orders, np.zeros(variances.size), variances, scale_prior))
+        weights.append(weight)
+    w = np.asarray(weights)
+    envelope: Orders = tuple(  # type: ignore[assignment]
+        max(p.orders[k] for p in posteriors) for k in range(len(posteriors[0].orders))
+    )
+    size = sum(envelope)
+    mean = np.zeros(size)
+    second = np.zeros((size, size))
+    for post, weight in zip(posteriors, w, strict=True):
+        idx = full_indices(post.orders, envelope)
+        embedded = np.zeros(size)
+        embedded[idx] = post.mean
+        mean += weight * embedded
+        second[np.ix_(idx, idx)] += weight * post.covariance
+        second += weight * np.outer(embedded, embedded)
+    covariance = second - np.outer(mean, mean)
+    covariance = 0.5 * (covariance + covariance.T)
+    dof = min(p.dof for p in posteriors)
+    scale = covariance if np.isinf(dof) else covariance * (dof - 2.0) / dof
+    return MixturePosterior(
+        orders=envelope,
+        mean=mean,
+        scale=scale,
+        dof=dof,
+        log_evidence=log_evidence,
+        noise_variance=float(w @ [p.noise_variance for p in posteriors]),
+        chi2=float(w @ [p.chi2 for p in posteriors]),
+        n_rows=normal.n_rows,
+        components=tuple(posteriors),
+        weights=w,
+    )

@@ -1,0 +1,203 @@
+"""Model choice: the hierarchical prior's evidence, the joint search, the averaged posterior.
+
+* the evidence over the prior's grid by one eigendecomposition equals the conjugate
+  solver's at every grid point (eq. 3.35);
+* the joint search ends where no single or paired move improves, and finds the
+  evidence-best model of an exhaustive grid on simulated runs;
+* the mixture's moments are the law of total variance, and its samples follow them;
+* a term injected below the old prior's detection threshold: the averaged predictive
+  covers the truth at the nominal rate where the old choice did not.
+"""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from calibration.averaging import MixturePosterior
+from calibration.conjugate import CoefficientPrior, ScalePrior, solve
+from calibration.model_fit import OrderChoice
+from calibration.order_search import search_orders_jointly
+from calibration.polynomial_model import full_indices
+from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
+from calibration.shrinkage import (
+    ShrinkagePrior,
+    log_evidence_grid,
+    log_evidence_scales,
+    marginal_log_evidence,
+)
+from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+
+COARSE = ITPM_CHANNEL_WIDTH_HZ * 8  # 820 channels: the same physics, faster runs
+
+
+def normal_equations_of(data, largest=(6, 6, 6, 6, 6)):
+    """The radiometric solver's normal equations for ``data`` (its own ``build``)."""
+    from calibration.basis import PolynomialBasis
+    from calibration.normal_equations import evaluate_coefficients
+    from calibration.radiometric_solver import LinearisedProblem, _normal_equations, linearise
+
+    basis = PolynomialBasis.for_frequencies(data.freq_hz, "legendre")
+    b = basis.matrix(data.freq_hz, max(largest))
+    terms, (temps, q, var_q) = data.terms(), data.stacked()
+    ridge = 1.0 / ShrinkagePrior().variances(largest)[-1]
+    start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
+    normal = _normal_equations(start, b, largest, ridge)
+    for _ in range(2):
+        theta = evaluate_coefficients(normal.reference, b, largest)
+        normal = _normal_equations(linearise(terms, temps, q, var_q, theta), b, largest, ridge)
+    return normal
+
+
+@pytest.fixture(scope="module")
+def normal():
+    run = simulate_run(SimulationConfig(channel_width_hz=COARSE), rng=np.random.default_rng(3))
+    return normal_equations_of(run.data)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_grid_evidence_is_the_conjugate_evidence_at_every_width(normal, seed):
+    rng = np.random.default_rng(seed)
+    orders = tuple(int(n) for n in rng.integers(1, 7, size=5))
+    prior = ShrinkagePrior(decays=(1.0, 0.2), n_scales=7)
+    scale = ScalePrior(1.0, 2.0) if seed % 2 else None
+    fast = log_evidence_scales(normal, orders, prior, scale)
+    batched = log_evidence_grid(normal, orders, prior.variances(orders), scale)
+    variances = prior.variances(orders)
+    direct = [solve(normal, orders, np.zeros(v.size), v, scale).log_evidence for v in variances]
+    finite = np.isfinite(batched)
+    assert finite.sum() >= len(direct) - 2
+    np.testing.assert_allclose(batched[finite], np.asarray(direct)[finite], rtol=1e-12, atol=1e-6)
+    np.testing.assert_allclose(fast[finite], batched[finite], rtol=1e-12, atol=1e-4)
+
+
+def test_the_constant_terms_width_does_not_move_a_bayes_factor(normal):
+    """Every model has the constants: their prior cancels between models."""
+    a, b = (3, 3, 3, 3, 3), (4, 3, 4, 4, 3)
+    factors = []
+    for width in (300.0, 3000.0, 30000.0):
+        prior = ShrinkagePrior(constant_sd_k=width)
+        za, zb = (log_evidence_scales(normal, o, prior, None) for o in (a, b))
+        factors.append(marginal_log_evidence(zb) - marginal_log_evidence(za))
+    assert max(factors) - min(factors) < 0.01
+
+
+def test_a_joint_move_gets_past_a_ridge_that_stops_single_moves():
+    """The stall of the issue: (2,3,3,3,3) beaten only by (3,3,3,2,3), two moves away."""
+
+    def landscape(orders):
+        o = np.asarray(orders, dtype=float)
+        ridge = -10.0 * (o[0] + o[3] - 5.0) ** 2
+        return float(ridge - (o[0] - 3) ** 2 - (o[3] - 2) ** 2 - np.sum((o[[1, 2, 4]] - 3) ** 2))
+
+    stall = (2, 3, 3, 3, 3)
+    singles = [(*stall[:k], stall[k] + d, *stall[k + 1:]) for k in range(5) for d in (-2, -1, 1, 2)]
+    assert all(landscape(s) < landscape(stall) for s in singles)
+    found = search_orders_jointly(landscape, (1,) * 5, (6,) * 5, starts=[stall])
+    grid = itertools.product(range(1, 7), repeat=5)
+    assert found.best == max(grid, key=landscape) == (3, 3, 3, 2, 3)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_search_finds_the_exhaustive_best_on_simulated_runs(seed):
+    rng = np.random.default_rng(40 + seed)
+    coefficients = {
+        "unc": [250, -12, rng.normal(0, 2)], "cos": [190, 25, rng.normal(0, 2), 1.0],
+        "sin": [90, -15], "NS": [1116, -28, rng.normal(0, 1)], "L": [300, 1.5],
+    }
+    config = SimulationConfig(
+        channel_width_hz=COARSE, integration_s=120.0, truth_coefficients=coefficients
+    )
+    normal = normal_equations_of(simulate_run(config, rng=rng).data)
+    prior = ShrinkagePrior()
+
+    def evidence(orders):
+        return marginal_log_evidence(log_evidence_scales(normal, orders, prior, ScalePrior()))
+
+    found = search_orders_jointly(evidence, (1,) * 5, (6,) * 5)
+    box = itertools.product(*(range(max(1, n - 1), min(6, n + 2)) for n in found.best))
+    exhaustive = {o: evidence(o) for o in itertools.product(range(1, 6), repeat=5)}
+    best = max(exhaustive, key=exhaustive.__getitem__)
+    assert found.best == best or exhaustive[best] <= found.log_evidence + 1e-9
+    assert all(evidence(o) <= found.log_evidence + 1e-9 for o in box)
+
+
+def test_the_mixture_has_the_moments_of_its_components_and_samples_them():
+    run = simulate_run(
+        SimulationConfig(channel_width_hz=COARSE, integration_s=120.0),
+        rng=np.random.default_rng(7),
+    )
+    solution = solve_radiometric(run.data)
+    post = solution.posterior
+    assert isinstance(post, MixturePosterior)
+    assert len(post.components) >= 2
+    assert np.isclose(post.weights.sum(), 1.0)
+    size = post.mean.size
+    mean, second = np.zeros(size), np.zeros((size, size))
+    for component, weight in zip(post.components, post.weights, strict=True):
+        idx = full_indices(component.orders, post.orders)
+        m = np.zeros(size)
+        m[idx] = component.mean
+        mean += weight * m
+        second += weight * np.outer(m, m)
+        second[np.ix_(idx, idx)] += weight * component.covariance
+    np.testing.assert_allclose(post.mean, mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(post.covariance, second - np.outer(mean, mean), atol=1e-9)
+    draws = post.sample(200_000, np.random.default_rng(0))
+    sd = np.sqrt(np.diag(post.covariance))
+    assert np.all(np.abs(draws.mean(axis=0) - post.mean) <= 4 * sd / np.sqrt(len(draws)) + 1e-12)
+    # a term only the lighter models have is a rare, heavy tail: 10 % on its spread
+    np.testing.assert_allclose(draws.std(axis=0), sd, rtol=0.10, atol=1e-12)
+    assert tuple(solution.metadata["best_orders"]) == solution.best_orders
+    weights = [w["weight"] for w in solution.metadata["model_weights"]]
+    assert weights == sorted(weights, reverse=True)
+    assert sum(weights) <= 1.0 + 1e-5
+
+
+def test_a_term_below_the_old_threshold_is_covered_by_the_averaged_predictive():
+    """T_NS's quadratic term at 3 posterior sigma: the fixed 3000 K prior drops it.
+
+    With the 2-minute Dicke positions of the issue's simulator, the term's posterior sd
+    is 0.25 K; the truth's term is 0.75 K (alternating in sign). Over 60 seeded runs, at
+    8 channels each, the old choice's 68 % intervals cover the calibrated source's truth
+    well below 68 %, the averaged predictive's at 68 % (both tolerances are about two
+    binomial sigma of the correlated channels).
+    """
+    base = {"unc": [250, -12, 6], "cos": [190, 25, -8], "sin": [90, -15, 10],
+            "L": [300, 1.5, -0.8]}
+    hits = {"old": [], "averaged": []}
+    chosen = {"old": 0, "averaged": 0}
+    for seed in range(60):
+        term = 0.75 if seed % 2 else -0.75
+        config = SimulationConfig(
+            channel_width_hz=COARSE, integration_s=120.0,
+            truth_coefficients={**base, "NS": [1116, -28, term]},
+        )
+        run = simulate_run(config, rng=np.random.default_rng(100 + seed))
+        f, gr, truth = run.data.freq_hz, run.data.gamma_rec, run.validation_temperature_k
+        solutions = {
+            "old": solve_radiometric(
+                run.data, prior=RadiometricPrior(coefficients=CoefficientPrior()), average=False
+            ),
+            "averaged": solve_radiometric(run.data),
+        }
+        channels = np.linspace(0, f.size - 1, 8).astype(int)
+        for name, solution in solutions.items():
+            calibrated = solution.calibrate(f, gr, run.validation_noiseless)
+            z = np.abs((calibrated.mean - truth) / calibrated.std_calibration)[channels]
+            hits[name].append([np.mean(z < 1.0), np.mean(z < 1.96)])
+            chosen[name] += solution.best_orders[3] >= 3
+    old, averaged = np.mean(hits["old"], axis=0), np.mean(hits["averaged"], axis=0)
+    assert chosen["old"] <= 10, chosen  # the old prior drops the term
+    assert old[0] < 0.62, old
+    assert abs(averaged[0] - 0.68) <= 0.05, averaged
+    assert abs(averaged[1] - 0.95) <= 0.03, averaged
+
+
+def test_fixed_orders_and_the_single_best_model_stay_available():
+    run = simulate_run(SimulationConfig(channel_width_hz=COARSE), rng=np.random.default_rng(5))
+    fixed = solve_radiometric(run.data, OrderChoice.fixed((4, 3, 4, 4, 3)))
+    assert fixed.orders == fixed.best_orders == (4, 3, 4, 4, 3)
+    single = solve_radiometric(run.data, average=False)
+    assert single.orders == single.best_orders
+    assert single.models_line() == ""
