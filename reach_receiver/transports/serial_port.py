@@ -8,11 +8,17 @@ real ports (``/dev/ttyACM0``) and the simulators' pseudo-terminals (``/dev/pts/N
 
 from __future__ import annotations
 
+import contextlib
+import termios
 import time
 
 import serial
 
 from reach_receiver.errors import ConnectionLost, DeviceTimeout, ProtocolError, ReceiverError
+
+#: What a port that went away raises: pyserial's own error, the OS's (EIO on a vanished
+#: USB device or pty), and termios's, which is not an OSError (``tcflush``, ``TIOCINQ``).
+LINK_ERRORS = (serial.SerialException, OSError, termios.error)
 
 
 class SerialTransport:
@@ -52,14 +58,15 @@ class SerialTransport:
             self._serial = serial.Serial(
                 self.port, baudrate=self.baudrate, timeout=0.05, write_timeout=self.timeout_s
             )
-        except (serial.SerialException, OSError) as err:
+        except LINK_ERRORS as err:
             message = f"cannot open serial port {self.port}: {err}"
             raise ConnectionLost(self.device, message) from err
 
     def close(self) -> None:
-        """Close the port; closing a closed port does nothing."""
+        """Close the port; closing a closed port (or one that went away) does nothing."""
         if self._serial is not None:
-            self._serial.close()
+            with contextlib.suppress(*LINK_ERRORS):  # a device that went away: nothing to close
+                self._serial.close()
             self._serial = None
 
     def _port(self) -> serial.Serial:
@@ -73,7 +80,7 @@ class SerialTransport:
         try:
             port.write(data)
             port.flush()
-        except (serial.SerialException, OSError) as err:
+        except LINK_ERRORS as err:
             raise ConnectionLost(self.device, f"write to {self.port} failed: {err}") from err
 
     def read_until(
@@ -95,7 +102,7 @@ class SerialTransport:
         while True:
             try:
                 chunk = port.read_until(terminator, limit - len(buffer))
-            except (serial.SerialException, OSError) as err:
+            except LINK_ERRORS as err:
                 raise ConnectionLost(self.device, f"read from {self.port} failed: {err}") from err
             buffer += chunk
             if buffer.endswith(terminator):
@@ -114,9 +121,13 @@ class SerialTransport:
         dropped = bytearray()
         deadline = time.monotonic() + quiet_s
         while time.monotonic() < deadline:
-            waiting = port.in_waiting
+            try:
+                waiting = port.in_waiting
+                if waiting:
+                    dropped += port.read(waiting)
+            except LINK_ERRORS as err:
+                raise ConnectionLost(self.device, f"read from {self.port} failed: {err}") from err
             if waiting:
-                dropped += port.read(waiting)
                 deadline = time.monotonic() + quiet_s
             else:
                 time.sleep(0.005)
