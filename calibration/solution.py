@@ -145,7 +145,7 @@ class Solution:
         out = []
         for s in coefficient_slices(self.orders):
             bs = b[:, : s.stop - s.start]
-            out.append(np.sqrt(np.einsum("nj,jk,nk->n", bs, cov[s, s], bs)))
+            out.append(np.sqrt(np.sum((bs @ cov[s, s]) * bs, axis=1)))
         return np.stack(out)
 
     def sample_parameters(
@@ -185,7 +185,7 @@ class Solution:
         rows = self.design_rows(freq, gamma_rec, source.gamma, source.q)
         post = self.posterior
         mean = rows @ post.mean
-        std_cal = np.sqrt(np.einsum("np,pq,nq->n", rows, post.covariance, rows))
+        std_cal = np.sqrt(np.maximum(np.sum((rows @ post.covariance) * rows, axis=1), 0.0))
         if self.measurement_model == "homoscedastic":
             std_meas = np.full(freq.shape, np.sqrt(post.noise_variance))
         elif channel_width_hz is None:
