@@ -85,7 +85,7 @@ def measure_here(seed: int = 0) -> dict[str, float | int | bool | str]:
     def solve_and_calibrate() -> str:
         solution = solve_radiometric(data)
         solution.calibrate(data.freq_hz, data.gamma_rec, run.validation, data.channel_width_hz)
-        return str(solution.orders)
+        return str(solution.best_orders)
 
     gc.collect()
     baseline_rss = _status_kb("VmRSS") or 0

@@ -110,7 +110,7 @@ def main(directory: Path) -> None:
     )
     print("  " + edges_cal_cross_check(data, published))
     for label, sol in solutions.items():
-        orders = dict(zip(PARAMETERS, sol.orders, strict=True))
+        orders = dict(zip(PARAMETERS, sol.best_orders, strict=True))
         print(
             f"  {label:9s} orders {orders}  s^2 = {sol.posterior.noise_variance:.3f}  "
             f"({timing[label]:.2f} s)"
@@ -149,7 +149,7 @@ def main(directory: Path) -> None:
         gain_k = x_l * 1000.0 * published["sca"]
         noise = rms(gain_k * np.sqrt(src.q_variance_override))
         floor0 = rms(gain_k * np.sqrt(et.radiometer_q_variance(src.p_source, 450)))
-        n_coef = sum(solutions["ours(ev)"].orders)
+        n_coef = sum(solutions["ours(ev)"].best_orders)
         expect = noise * np.sqrt(1 - n_coef / n_rows)
         cr = noise_floor(data, src, solutions["ours(ev)"].parameters).rms
         theirs = et.published_calibrated_temperature(published, src.p_source, src.gamma)

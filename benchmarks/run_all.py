@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from benchmarks import accuracy, main_job, memory, spectra_rate, speed
+from benchmarks import accuracy, main_job, memory, model_choice, spectra_rate, speed
 
 
 def main() -> int:
@@ -34,6 +34,8 @@ def main() -> int:
     rates = spectra_rate.main([])
     print("=" * 100)
     job = main_job.main(["--seeds", "3"])
+    print("=" * 100)
+    choices = model_choice.main(["--runs", "30"])
     print("=" * 100)
     print("SUMMARY (all measured in this run)")
     print("=" * 100)
@@ -88,6 +90,9 @@ def main() -> int:
         f"simulated hours; target <= 60 s: {'PASS' if job.passed else 'FAIL'}; error bars: "
         f"actual/predicted RMS {job.honesty_rms:.2f} over {job.runs} seeds"
     )
+    for name, tallies in choices.items():
+        print(f"  model     {name}: averaged {tallies['averaged'].line()}; "
+              f"true orders {tallies['true orders'].line()}")
     print(f"  total benchmark time {time.perf_counter() - start:.1f} s")
     return 0
 

@@ -34,7 +34,8 @@ import numpy as np
 
 from benchmarks.accuracy import FOUR_LOADS
 from benchmarks.edges_cal_baseline import solve_edges
-from calibration.radiometric_solver import solve_radiometric
+from calibration.conjugate import CoefficientPrior
+from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
 from calibration.simulate import SimulatedRun, SimulationConfig, simulate_run
 from calibration.thesis_solver import solve_thesis
 
@@ -43,6 +44,8 @@ TARGET_SECONDS = 1.0
 REPEATS = 5
 
 OURS = "ours: solve_radiometric + calibrate (12 cal)"
+OURS_BEST = "ours, single best model (average=False)"
+OURS_FIXED = "ours, fixed 3000 K prior (the earlier default)"
 THESIS = "thesis: solve_thesis + calibrate (12 cal)"
 EDGES = "edges-cal iterative + calibrate (4 loads)"
 OURS_4 = "ours: solve_radiometric + calibrate (4 loads)"
@@ -68,6 +71,15 @@ def workloads(run: SimulatedRun) -> dict[str, Callable[[], object]]:
     def ours() -> object:
         return solve_radiometric(data).calibrate(freq, gamma_rec, run.validation, width)
 
+    def ours_best() -> object:
+        solution = solve_radiometric(data, average=False)
+        return solution.calibrate(freq, gamma_rec, run.validation, width)
+
+    def ours_fixed() -> object:
+        fixed = RadiometricPrior(coefficients=CoefficientPrior())
+        solution = solve_radiometric(data, prior=fixed, average=False)
+        return solution.calibrate(freq, gamma_rec, run.validation, width)
+
     def ours4() -> object:
         return solve_radiometric(data4).calibrate(freq, gamma_rec, run.validation, width)
 
@@ -77,7 +89,10 @@ def workloads(run: SimulatedRun) -> dict[str, Callable[[], object]]:
     def edges() -> object:
         return solve_edges(data4).calibrate(run.validation)
 
-    return {OURS: ours, THESIS: thesis, EDGES: edges, OURS_4: ours4}
+    return {
+        OURS: ours, OURS_BEST: ours_best, OURS_FIXED: ours_fixed, THESIS: thesis, EDGES: edges,
+        OURS_4: ours4,
+    }
 
 
 #: Environment variables that pin the BLAS libraries to one thread.
@@ -159,6 +174,11 @@ def report(result: SpeedResult) -> None:
         f"  ratio ours (12 cal) / edges-cal (4 loads) = {result.ratio_to_edges:.2f}; "
         f"ours (4 loads) / edges-cal (4 loads) = "
         f"{result.median(OURS_4) / result.median(EDGES):.2f}"
+    )
+    print(
+        f"  ratio ours (averaged) / single best model = "
+        f"{result.median(OURS) / result.median(OURS_BEST):.2f}; / fixed 3000 K prior = "
+        f"{result.median(OURS) / result.median(OURS_FIXED):.2f}"
     )
 
 
