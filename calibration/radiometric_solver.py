@@ -151,8 +151,8 @@ def solve_radiometric(
     coefficient_prior = prior.coefficients
 
     def ridge(orders: Orders) -> FloatArray:
-        if isinstance(coefficient_prior, ShrinkagePrior):
-            return 1.0 / coefficient_prior.variances(orders)[-1]
+        if isinstance(coefficient_prior, ShrinkagePrior):  # its widest: the data decide
+            return 1.0 / coefficient_prior.widest_variances(orders)
         return 1.0 / coefficient_prior.vectors(orders)[1]
 
     def build(largest: Orders) -> NormalEquations:

@@ -104,6 +104,12 @@ class ShrinkagePrior:
         """Points of the hyperparameter grid: every decay times every scale."""
         return len(self.decays) * self.n_scales
 
+    def widest_variances(self, orders: Sequence[int]) -> FloatArray:
+        """The grid's widest prior (no decay, ``tau_max``): a weak ridge for a reference fit."""
+        orders = as_orders(orders)
+        power = np.concatenate([np.arange(n) - 1.0 for n in orders])
+        return np.where(power >= 0, self.tau_max_k**2, self.constant_sd_k**2)
+
     def variances(self, orders: Sequence[int]) -> FloatArray:
         """Prior variance of every coefficient of ``orders`` at every grid point: ``(G, P)``.
 

@@ -40,7 +40,7 @@ def normal_equations_of(data, largest=(6, 6, 6, 6, 6)):
     basis = PolynomialBasis.for_frequencies(data.freq_hz, "legendre")
     b = basis.matrix(data.freq_hz, max(largest))
     terms, (temps, q, var_q) = data.terms(), data.stacked()
-    ridge = 1.0 / ShrinkagePrior().variances(largest)[-1]
+    ridge = 1.0 / ShrinkagePrior().widest_variances(largest)
     start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
     normal = _normal_equations(start, b, largest, ridge)
     for _ in range(2):
