@@ -60,6 +60,44 @@ def _paired_moves(orders: Orders, lo: Sequence[int], hi: Sequence[int]) -> Itera
                         yield tuple(moved)  # type: ignore[misc]
 
 
+def _climb(
+    log_evidence: Callable[[Orders], float],
+    lo: Orders,
+    hi: Orders,
+    starts: Sequence[Orders],
+    moves: Sequence[Callable[[Orders], Iterable[Orders]]],
+) -> OrderSearchResult:
+    """Steepest ascent from each start: the best of the first kind of move that improves.
+
+    ``moves`` are tried in turn at each step (cheap ones first); the climb ends where none
+    improves. Every model evaluated is in the table, each scored by ``log_evidence``.
+    """
+    if any(a > b for a, b in zip(lo, hi, strict=True)):
+        raise ValueError(f"min_orders {lo} exceed max_orders {hi}")
+    table: dict[Orders, float] = {}
+
+    def score(orders: Orders) -> float:
+        if orders not in table:
+            table[orders] = log_evidence(orders)
+        return table[orders]
+
+    for start in starts:
+        current: Orders = tuple(  # type: ignore[assignment]
+            min(max(n, a), b) for n, a, b in zip(start, lo, hi, strict=True)
+        )
+        current_score = score(current)
+        while True:
+            for move in moves:
+                best = max(move(current), key=score, default=None)
+                if best is not None and score(best) > current_score:
+                    break
+            else:
+                break
+            current, current_score = best, score(best)
+    best_orders = max(table, key=table.__getitem__)
+    return OrderSearchResult(best_orders, table[best_orders], table)
+
+
 def search_orders_jointly(
     log_evidence: Callable[[Orders], float],
     min_orders: Sequence[int],
@@ -71,33 +109,13 @@ def search_orders_jointly(
 
     One climb from each of ``starts`` (the smallest model when none is given): the best
     single-parameter move of up to ``lookahead`` terms while one improves, else the best
-    move of two parameters by one term each; it ends where neither improves. Every model
-    evaluated is in the table, each scored by the same ``log_evidence``.
+    move of two parameters by one term each; it ends where neither improves.
     """
     lo, hi = as_orders(min_orders), as_orders(max_orders)
-    if any(a > b for a, b in zip(lo, hi, strict=True)):
-        raise ValueError(f"min_orders {lo} exceed max_orders {hi}")
-    table: dict[Orders, float] = {}
-
-    def score(orders: Orders) -> float:
-        if orders not in table:
-            table[orders] = log_evidence(orders)
-        return table[orders]
-
-    for start in [as_orders(s) for s in starts] or [lo]:
-        current: Orders = tuple(  # type: ignore[assignment]
-            min(max(n, a), b) for n, a, b in zip(start, lo, hi, strict=True)
-        )
-        current_score = score(current)
-        while True:  # single moves while they climb; paired ones before giving up
-            best = max(_neighbours(current, lookahead, lo, hi), key=score, default=None)
-            if best is None or score(best) <= current_score:
-                best = max(_paired_moves(current, lo, hi), key=score, default=None)
-            if best is None or score(best) <= current_score:
-                break
-            current, current_score = best, score(best)
-    best_orders = max(table, key=table.__getitem__)
-    return OrderSearchResult(best_orders, table[best_orders], table)
+    return _climb(
+        log_evidence, lo, hi, [as_orders(s) for s in starts] or [lo],
+        [lambda o: _neighbours(o, lookahead, lo, hi), lambda o: _paired_moves(o, lo, hi)],
+    )
 
 
 def search_orders(
@@ -113,24 +131,7 @@ def search_orders(
     any extra ``starts``. A model that cannot be solved should return ``-inf``.
     """
     lo, hi = as_orders(min_orders), as_orders(max_orders)
-    if any(a > b for a, b in zip(lo, hi, strict=True)):
-        raise ValueError(f"min_orders {lo} exceed max_orders {hi}")
-    table: dict[Orders, float] = {}
-
-    def score(orders: Orders) -> float:
-        if orders not in table:
-            table[orders] = log_evidence(orders)
-        return table[orders]
-
-    all_starts = [lo, hi] + [as_orders(s) for s in starts]
-    for start in all_starts:
-        current = tuple(min(max(n, a), b) for n, a, b in zip(start, lo, hi, strict=True))
-        current_score = score(current)  # type: ignore[arg-type]
-        while True:
-            candidates = list(_neighbours(current, lookahead, lo, hi))  # type: ignore[arg-type]
-            best = max(candidates, key=score, default=None)
-            if best is None or score(best) <= current_score:
-                break
-            current, current_score = best, score(best)
-    best_orders = max(table, key=table.__getitem__)
-    return OrderSearchResult(best_orders, table[best_orders], table)
+    return _climb(
+        log_evidence, lo, hi, [lo, hi, *(as_orders(s) for s in starts)],
+        [lambda o: _neighbours(o, lookahead, lo, hi)],
+    )

@@ -190,19 +190,24 @@ def log_evidence_grid(
     log_det = 2.0 * np.sum(np.log(np.einsum("gii->gi", chol)), axis=1) + 2.0 * np.sum(
         np.log(jacobi), axis=1
     )
-    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
     occam = -0.5 * log_det - 0.5 * np.sum(np.log(prior_var), axis=1)
-    if scale_prior is None:
-        values = base - 0.5 * q_min + occam
-    else:
-        a, b = scale_prior.a, scale_prior.b
-        a_star = a + 0.5 * normal.n_rows
-        values = (
-            base + a * np.log(b) - a_star * np.log(b + 0.5 * q_min)
-            + gammaln(a_star) - gammaln(a) + occam
-        )
-    log_z[ok] = values
+    log_z[ok] = _log_evidence(normal, q_min, occam, scale_prior)
     return log_z
+
+
+def _log_evidence(
+    normal: NormalEquations, q_min: FloatArray, occam: FloatArray, scale_prior: ScalePrior | None
+) -> FloatArray:
+    """Eq. 3.35 (or its known-``s^2`` form) from ``Q_min`` and the Occam term, per width."""
+    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
+    if scale_prior is None:
+        return np.asarray(base - 0.5 * q_min + occam)
+    a, b = scale_prior.a, scale_prior.b
+    a_star = a + 0.5 * normal.n_rows
+    return np.asarray(
+        base + a * np.log(b) - a_star * np.log(b + 0.5 * q_min)
+        + gammaln(a_star) - gammaln(a) + occam
+    )
 
 
 def log_evidence_scales(
@@ -288,18 +293,8 @@ def log_evidence_scales(
         q_h, log_det_h, bad = np.zeros_like(t), np.zeros_like(t), np.zeros(t.size, dtype=bool)
     log_v0 = c.size * np.log(v_c) - n_h * np.log(t)  # log|D| cancels against log|Lambda_H|
     q_min = np.maximum(q_c + q_h, 0.0)
-    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
     occam = -0.5 * (log_det_k + log_det_h) - 0.5 * log_v0
-    if scale_prior is None:
-        values = base - 0.5 * q_min + occam
-    else:
-        a, b = scale_prior.a, scale_prior.b
-        a_star = a + 0.5 * normal.n_rows
-        values = (
-            base + a * np.log(b) - a_star * np.log(b + 0.5 * q_min)
-            + gammaln(a_star) - gammaln(a) + occam
-        )
-    return np.where(bad, -np.inf, values)
+    return np.where(bad, -np.inf, _log_evidence(normal, q_min, occam, scale_prior))
 
 
 def marginal_log_evidence(grid: FloatArray) -> float:
