@@ -26,3 +26,14 @@ class IllPosedError(CalibrationError):
 
 class FileFormatError(CalibrationError, ValueError):
     """An HDF5 or text file that is not in a format this engine reads."""
+
+
+class DegenerateStandardsError(InvalidDataError):
+    """Calibration standards that do not determine the VNA error terms at some frequencies.
+
+    ``freq_hz`` holds those frequencies (channel indices when no frequencies were given).
+    """
+
+    def __init__(self, message: str, freq_hz: tuple[float, ...]) -> None:
+        self.freq_hz = freq_hz
+        super().__init__(message)

@@ -14,9 +14,12 @@ The error terms drift linearly with the clock's time (``drift_rate_per_s``) and 
 
 Calibration. ``SENS1:CORR:COLL:{SHOR,OPEN,LOAD} 1`` each measure whatever ``reflection``
 returns at that moment (a wrong switch position gives a wrong calibration, as on the
-real instrument); ``SENS1:CORR:COLL:SAVE`` solves, per frequency, the linear system
-``m_i = e00 + G_i m_i e11 + G_i D`` with ``D = e10e01 - e00 e11`` for the ideal standards
-``G = -1, +1, 0``, and corrected data are ``G = (m - e00) / (e10e01 + e11 (m - e00))``.
+real instrument); ``SENS1:CORR:COLL:SAVE`` solves for the error terms with the engine's
+:func:`calibration.one_port.solve_one_port` (the linear system
+``m_i = e00 + G_i m_i e11 + G_i D``, ``D = e10e01 - e00 e11``, every frequency at once)
+for the ideal standards of :data:`calibration.cal_kit.IDEAL_KIT` (``G = -1, +1, 0``), and
+corrected data are ``G = (m - e00) / (e10e01 + e11 (m - e00))``
+(:func:`calibration.one_port.correct_reflection`).
 
 Faults on demand (:meth:`VnaSimulator.inject`): no reply, garbled reply, truncated data,
 connection drop before or in the middle of a reply, a queued SCPI error; and a mode in
@@ -39,8 +42,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from calibration.cal_kit import IDEAL_KIT
+from calibration.errors import CalibrationError
+from calibration.one_port import OnePortTerms, solve_one_port
 from reach_receiver.clock import Clock
-from reach_receiver.sim.vna_model import ComplexArray, ErrorModel, solve_one_port, sweep_duration_s
+from reach_receiver.sim.vna_model import ComplexArray, ErrorModel, sweep_duration_s
 from reach_receiver.transports.scpi import socket_address
 
 __all__ = [
@@ -58,7 +64,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 Reflection = Callable[[NDArray[np.float64]], NDArray[np.complex128]]
-_STANDARDS = {"SHOR": -1.0 + 0j, "OPEN": 1.0 + 0j, "LOAD": 0j}
+_STANDARDS = ("SHOR", "OPEN", "LOAD")  # the order of calibration.cal_kit.STANDARD_NAMES
 _LONG_FORMS = {
     "SENSE": "SENS", "FREQUENCY": "FREQ", "START": "STAR", "SWEEP": "SWE", "POINTS": "POIN",
     "BWIDTH": "BWID", "SOURCE": "SOUR", "POWER": "POW", "AVERAGE": "AVER", "COUNT": "COUN",
@@ -104,7 +110,7 @@ class _State:
     trigger_averaging: bool = False
     correction: bool = False
     cal_freq_hz: NDArray[np.float64] | None = None
-    cal_terms: tuple[ComplexArray, ComplexArray, ComplexArray] | None = None
+    cal_terms: OnePortTerms | None = None
     collected: dict[str, ComplexArray] = field(default_factory=dict)
 
     def freq_hz(self) -> NDArray[np.float64]:
@@ -434,8 +440,7 @@ class VnaSimulator:
         raw = self._raw_sweep()
         data = raw
         if s.correction and s.cal_terms is not None:
-            e00, e11, tracking = s.cal_terms
-            data = (raw - e00) / (tracking + e11 * (raw - e00))
+            data = s.cal_terms.correct(raw)
         self._trace = (s.freq_hz(), data)
 
     def _trace_data(self) -> tuple[NDArray[np.float64], ComplexArray]:
@@ -456,10 +461,11 @@ class VnaSimulator:
             self._errors.append((-200, "Execution error; calibration incomplete"))
             return
         measured = np.stack([s.collected[k] for k in _STANDARDS])
-        ideal = np.array(list(_STANDARDS.values()))
+        freq = s.freq_hz()
         try:
-            s.cal_terms = solve_one_port(measured, ideal)
-        except np.linalg.LinAlgError:
+            s.cal_terms = solve_one_port(measured, IDEAL_KIT.reflections(freq), freq)
+        except CalibrationError as exc:
+            log.info("simulated VNA: calibration failed: %s", exc)
             self._errors.append((-200, "Execution error; singular calibration"))
             return
         s.cal_freq_hz = s.freq_hz()

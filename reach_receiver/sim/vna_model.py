@@ -1,4 +1,4 @@
-"""One-port error model of the simulated VNA, and its solution from three standards.
+"""One-port error model of the simulated VNA.
 
 The port sees a true reflection ``G(f)``; the raw reading passes it through the one-port
 error model (Pozar, *Microwave Engineering*, 4th ed., sec. 4.6; scikit-rf's ``OnePort``)::
@@ -7,13 +7,9 @@ error model (Pozar, *Microwave Engineering*, 4th ed., sec. 4.6; scikit-rf's ``On
 
 with directivity ``e00``, source match ``e11`` and reflection tracking ``e10e01``.
 :class:`ErrorModel` makes these terms smooth, seeded complex functions of frequency that
-drift with time; :func:`solve_one_port` recovers them from the raw readings ``m_i`` of
-three standards of known reflection ``G_i`` (short, open, load: ``-1, +1, 0``) by solving,
-per frequency, the linear system::
-
-    m_i = e00 + G_i m_i e11 + G_i D,    D = e10e01 - e00 e11
-
-Corrected data are then ``G = (m - e00) / (e10e01 + e11 (m - e00))``.
+drift with time. The model itself, its solution from measured standards and the
+correction are the calibration engine's (:mod:`calibration.one_port`), so the simulated
+instrument and offline calibration share one implementation.
 :func:`sweep_duration_s` gives the simulated sweep time. No I/O: the SCPI server is
 :class:`reach_receiver.sim.vna.VnaSimulator`, which re-exports these names.
 """
@@ -24,6 +20,8 @@ import threading
 
 import numpy as np
 from numpy.typing import NDArray
+
+from calibration.one_port import OnePortTerms
 
 ComplexArray = NDArray[np.complex128]
 
@@ -70,9 +68,7 @@ class ErrorModel:
         with self._lock:
             return self.drift_rate_per_s * (t - self._t0) + self._forced
 
-    def terms(
-        self, freq_hz: NDArray[np.float64], t: float
-    ) -> tuple[ComplexArray, ComplexArray, ComplexArray]:
+    def terms(self, freq_hz: NDArray[np.float64], t: float) -> OnePortTerms:
         """``(e00, e11, e10e01)`` at ``freq_hz`` and clock time ``t``."""
         x = (np.asarray(freq_hz) - 650e6) / 650e6
         d = self.drift(t)
@@ -81,24 +77,8 @@ class ErrorModel:
             base = self._AMPLITUDE[i] * np.exp(-2j * np.pi * freq_hz * self._DELAY_S[i])
             base = base * (1 + self._RIPPLE[i] * _smooth(self._shape[i], x))
             out.append(base * (1 + d * _smooth(self._drift_shape[i], x)))
-        return out[0], out[1], out[2]
+        return OnePortTerms(out[0], out[1], out[2])
 
     def measure(self, freq_hz: NDArray[np.float64], truth: ComplexArray, t: float) -> ComplexArray:
         """Noise-free raw reading ``m = e00 + e10e01 G / (1 - e11 G)``."""
-        e00, e11, tracking = self.terms(freq_hz, t)
-        return e00 + tracking * truth / (1 - e11 * truth)
-
-
-def solve_one_port(
-    measured: ComplexArray, ideal: ComplexArray
-) -> tuple[ComplexArray, ComplexArray, ComplexArray]:
-    """Error terms from three measured standards of known reflection ``ideal``.
-
-    Solves ``m_i = e00 + G_i m_i e11 + G_i D`` (``D = e10e01 - e00 e11``) per frequency;
-    ``measured`` has shape ``(3, n_freq)``. Raises ``LinAlgError`` when singular.
-    """
-    g = ideal[:, None] * np.ones_like(measured)
-    matrix = np.stack([np.ones_like(measured), g * measured, g], axis=-1).transpose(1, 0, 2)
-    solution = np.linalg.solve(matrix, measured.T[..., None])[..., 0]
-    e00, e11, delta = solution.T
-    return e00, e11, delta + e00 * e11
+        return self.terms(freq_hz, t).embed(truth)
