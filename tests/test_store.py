@@ -407,7 +407,7 @@ def test_touchstone_formats_and_units(tmp_path, name):
         ("# Hz S RI R 50\n1 2\n", r"bad\.s1p:2: expected 'f a b'"),
         ("# Hz S RI R 50\n1 0 0\n1 0 0\n", r"bad\.s1p:3: frequency 1\.0 does not increase"),
         ("# Hz Y RI R 50\n1 0 0\n", r"bad\.s1p:1: unsupported option 'Y'"),
-        ("! nothing\n", r"bad\.s1p: no data lines"),
+        ("! nothing\n", r"bad\.s1p:1: no data lines"),
         ("# Hz S RI R\n1 0 0\n", r"bad\.s1p:1: 'R' needs"),
         ("# Hz S RI\n1 x 0\n", r"bad\.s1p:2: not a number"),
     ],
