@@ -17,7 +17,7 @@ from decimal import Decimal
 import numpy as np
 import pytest
 import skrf
-from touchstone_variants import DATA_ROOT, Variant, make_variant, real_touchstone_files
+from touchstone_variants import DATA_ROOT, Variant, make_variant
 
 from calibration import edges_text as et
 from calibration import touchstone as ts
@@ -347,18 +347,6 @@ def test_touchstone_data_checks_its_arrays():
 def test_the_store_re_exports_the_engine_module():
     for name in ts.__all__:
         assert getattr(store_touchstone, name) is getattr(ts, name)
-
-
-def test_real_touchstone_files_read_as_scikit_rf():
-    """Every ``.s1p``/``.s2p`` under the shared data directory, if it has any."""
-    if not DATA_ROOT.is_dir():
-        pytest.skip(f"no shared data directory beside this checkout ({DATA_ROOT})")
-    files = real_touchstone_files()
-    if not files:
-        pytest.skip(f"{DATA_ROOT} holds no .s1p/.s2p file (only other formats)")
-    for path in files:
-        got = ts.read_touchstone_network(path)
-        assert_same(got.freq_hz, got.s, *skrf_read(path)[:2])
 
 
 def test_real_edges3_s11_in_a_vna_styled_file(tmp_path):

@@ -8,7 +8,6 @@ any defaults left out, vendor ``#`` lines, an IEEE 488.2 block header on line 1,
 read, and says whether scikit-rf 2.2 reads the variant itself.
 """
 
-import re
 from dataclasses import dataclass
 from decimal import Decimal
 from pathlib import Path
@@ -29,12 +28,6 @@ class Variant:
     s: np.ndarray
     z0: float
     skrf_reads_it: bool
-
-
-def real_touchstone_files() -> list[Path]:
-    """Every ``.s1p``/``.s2p`` (any case) under the shared data directory."""
-    return sorted(p for p in DATA_ROOT.rglob("*")
-                  if p.is_file() and re.fullmatch(r"\.s[12]p", p.suffix.lower()))
 
 
 def _case(rng, word):
