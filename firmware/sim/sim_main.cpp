@@ -218,7 +218,9 @@ int main(int argc, char** argv) {
       hal.watchdog_kick();
     }
 
-    if (hal.millis() - hal.last_kick_ms() >= static_cast<uint32_t>(watchdog_ms)) {
+    // Only a loop that HANG stopped starves the WDOG: this process being descheduled by a
+    // busy host for a second is not a hung core, and must not reset the board.
+    if (hung && hal.millis() - hal.last_kick_ms() >= static_cast<uint32_t>(watchdog_ms)) {
       // The WDOG fires: what the host sent meanwhile is lost, the board starts afresh.
       while (read(master, buf, sizeof buf) > 0) {
       }
