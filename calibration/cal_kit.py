@@ -112,6 +112,14 @@ def offset_reflection(
     return np.asarray(numerator / denominator, dtype=complex)
 
 
+def _polynomial(
+    freq_hz: ArrayLike, coefficients: tuple[float, ...], units: tuple[float, ...]
+) -> FloatArray:
+    """A data sheet's cubic in frequency, its coefficients in their units, in SI."""
+    coef = [c * u for c, u in zip(coefficients, units, strict=True)]
+    return np.asarray(np.polynomial.polynomial.polyval(np.asarray(freq_hz, float), coef))
+
+
 @dataclass(frozen=True)
 class OpenStandard:
     """An open: fringing capacitance ``C(f)`` (K5) behind an offset."""
@@ -128,11 +136,7 @@ class OpenStandard:
 
     def capacitance_f(self, freq_hz: ArrayLike) -> FloatArray:
         """``C(f)`` in farads."""
-        coef = [
-            c * u
-            for c, u in zip((self.c0, self.c1, self.c2, self.c3), _CAPACITANCE_UNITS, strict=True)
-        ]
-        return np.asarray(np.polynomial.polynomial.polyval(np.asarray(freq_hz, float), coef))
+        return _polynomial(freq_hz, (self.c0, self.c1, self.c2, self.c3), _CAPACITANCE_UNITS)
 
     def reflection(self, freq_hz: ArrayLike, z_ref_ohm: float = REFERENCE_OHM) -> ComplexArray:
         """Actual reflection: ``GT = (1 - j omega C Zr) / (1 + j omega C Zr)`` (K5, K7), K8."""
@@ -157,11 +161,7 @@ class ShortStandard:
 
     def inductance_h(self, freq_hz: ArrayLike) -> FloatArray:
         """``L(f)`` in henries."""
-        coef = [
-            c * u
-            for c, u in zip((self.l0, self.l1, self.l2, self.l3), _INDUCTANCE_UNITS, strict=True)
-        ]
-        return np.asarray(np.polynomial.polynomial.polyval(np.asarray(freq_hz, float), coef))
+        return _polynomial(freq_hz, (self.l0, self.l1, self.l2, self.l3), _INDUCTANCE_UNITS)
 
     def reflection(self, freq_hz: ArrayLike, z_ref_ohm: float = REFERENCE_OHM) -> ComplexArray:
         """Actual reflection: ``GT = (j omega L - Zr) / (j omega L + Zr)`` (K6, K7), K8."""
