@@ -32,8 +32,6 @@ rounding of the polar conversion (about 1e-15 relative).
 
 from __future__ import annotations
 
-import os
-import secrets
 from dataclasses import dataclass, field
 from decimal import Decimal
 from pathlib import Path
@@ -41,6 +39,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .atomic_file import write_atomically
 from .touchstone_reader import TouchstoneError, parse_touchstone
 
 __all__ = [
@@ -208,7 +207,7 @@ def write_touchstone_network(
         data = text.encode("ascii")
     except UnicodeEncodeError as err:
         raise ValueError(f"{path}: Touchstone files are ASCII; a comment is not") from err
-    _write_atomically(path, data)
+    write_atomically(path, data)
 
 
 def _frequency_text(freq_hz: float, exponent: int) -> str:
@@ -226,17 +225,3 @@ def _pair_text(value: complex, fmt: str) -> list[str]:
     return [repr(float(a)), repr(float(b))]
 
 
-def _write_atomically(path: Path, data: bytes) -> None:
-    """Write to a temporary file beside ``path``, flush it to disk, then rename over it."""
-    # os.open, not mkstemp: the file gets the umask's permissions (mkstemp's are 0600).
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise

@@ -10,14 +10,13 @@ job that was running is found and marked interrupted by recovery.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import tempfile
 import threading
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
+
+from calibration.atomic_file import write_atomically
 
 JobState = Literal["queued", "running", "completed", "failed", "interrupted", "cancelled"]
 ENDED: tuple[JobState, ...] = ("completed", "failed", "interrupted", "cancelled")
@@ -118,24 +117,4 @@ class JobQueue:
             for old in ended[:-KEEP_ENDED]:
                 self._jobs.remove(old)
             text = json.dumps({"next_id": self._next, "jobs": [asdict(j) for j in self._jobs]})
-            _atomic_write(self.path, text)
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-        directory = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(directory)
-        finally:
-            os.close(directory)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+            write_atomically(self.path, text)

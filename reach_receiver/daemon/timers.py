@@ -20,10 +20,9 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
+from calibration.atomic_file import write_atomically
 from reach_receiver.config.daemon import DaemonSettings, TimerSettings
 from reach_receiver.schedule.lst import SIDEREAL_RATE, next_utc_at_lst
-
-from .jobs import _atomic_write
 
 log = logging.getLogger(__name__)
 
@@ -130,7 +129,7 @@ class Timers:
     def _save(self, now: float) -> None:
         self.checked = now
         self._written = now
-        _atomic_write(self.path, json.dumps({"fired": self.fired, "checked": now}))
+        write_atomically(self.path, json.dumps({"fired": self.fired, "checked": now}))
 
 
 def _utc(at: float) -> str:
