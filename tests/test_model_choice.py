@@ -16,13 +16,13 @@ import pytest
 
 from calibration.averaging import MixturePosterior
 from calibration.conjugate import CoefficientPrior, ScalePrior, solve
+from calibration.errors import IllPosedError
 from calibration.model_fit import OrderChoice
 from calibration.order_search import search_orders_jointly
 from calibration.polynomial_model import full_indices
 from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
 from calibration.shrinkage import (
     ShrinkagePrior,
-    log_evidence_grid,
     log_evidence_scales,
     marginal_log_evidence,
 )
@@ -62,13 +62,17 @@ def test_the_grid_evidence_is_the_conjugate_evidence_at_every_width(normal, seed
     prior = ShrinkagePrior(decays=(1.0, 0.2), n_scales=7)
     scale = ScalePrior(1.0, 2.0) if seed % 2 else None
     fast = log_evidence_scales(normal, orders, prior, scale)
-    batched = log_evidence_grid(normal, orders, prior.variances(orders), scale)
-    variances = prior.variances(orders)
-    direct = [solve(normal, orders, np.zeros(v.size), v, scale).log_evidence for v in variances]
-    finite = np.isfinite(batched)
+
+    def conjugate(variances):
+        try:
+            return solve(normal, orders, np.zeros(variances.size), variances, scale).log_evidence
+        except IllPosedError:
+            return -np.inf
+
+    direct = np.array([conjugate(v) for v in prior.variances(orders)])
+    finite = np.isfinite(direct)
     assert finite.sum() >= len(direct) - 2
-    np.testing.assert_allclose(batched[finite], np.asarray(direct)[finite], rtol=1e-12, atol=1e-6)
-    np.testing.assert_allclose(fast[finite], batched[finite], rtol=1e-12, atol=1e-4)
+    np.testing.assert_allclose(fast[finite], direct[finite], rtol=1e-12, atol=1e-4)
 
 
 def test_the_constant_terms_width_does_not_move_a_bayes_factor(normal):
