@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
 
-from .data import CalibrationData, Integration, SourceData
+from .data import CalibrationData
 from .errors import FileFormatError
+from .text_table import read_columns
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -51,28 +51,30 @@ UT141C = {
 
 def read_spectrum(path: str | Path) -> tuple[FloatArray, FloatArray, int, str]:
     """``(freq_hz, t_star, n_spectra, header)`` of an ``sp*.txt`` averaged spectrum."""
-    first = Path(path).read_text().splitlines()[0]
+    lines = Path(path).read_text(errors="replace").splitlines()
+    first = lines[0] if lines else ""
     fields = first.split("//")[0].split()
-    if len(fields) < 4:
-        raise FileFormatError(f"{path}: line 1 lacks the number of averaged spectra")
-    data = np.loadtxt(path, usecols=(0, 1, 2), comments="//", ndmin=2)
+    if len(fields) < 4 or not fields[3].isdigit():
+        raise FileFormatError(f"{path}:1: line 1 lacks the number of averaged spectra")
+    data = read_columns(path, 3, comments=("//",))
     return data[:, 0] * 1e6, data[:, 1], int(fields[3]), first.partition("//")[2].strip()
 
 
 def read_s11_csv(path: str | Path) -> tuple[FloatArray, ComplexArray]:
     """``(freq_hz, gamma)`` of an ``s11*.csv`` file (rows after ``BEGIN``, up to ``END``)."""
-    lines = Path(path).read_text().splitlines()
+    lines = Path(path).read_text(errors="replace").splitlines()
     if not lines or lines[0].strip() != "BEGIN":
-        raise FileFormatError(f"{path}: no BEGIN line")
-    rows = [ln.split(",") for ln in lines[1:] if ln.strip() and ln.strip() != "END"]
-    d = np.array(rows, dtype=float)
+        raise FileFormatError(f"{path}:1: no BEGIN line")
+    d = read_columns(path, 3, markers=("BEGIN", "END"))
     return d[:, 0] * 1e6, d[:, 1] + 1j * d[:, 2]
 
 
-def read_modelled_s11(path: str | Path) -> tuple[FloatArray, dict[str, ComplexArray]]:
-    """``(freq_hz, {amb, hot, open, short, lna: gamma})`` from ``s11_modelled.txt``."""
-    d = np.loadtxt(path, comments="#", ndmin=2)
-    return d[:, 0] * 1e6, {n: d[:, 2 * i + 1] + 1j * d[:, 2 * i + 2] for i, n in enumerate(NAMES)}
+def read_modelled_s11(
+    path: str | Path, names: tuple[str, ...] = NAMES
+) -> tuple[FloatArray, dict[str, ComplexArray]]:
+    """``(freq_hz, {name: gamma})`` from ``s11_modelled.txt``: ``freq_MHz`` then re/im pairs."""
+    d = read_columns(path, 1 + 2 * len(names))
+    return d[:, 0] * 1e6, {n: d[:, 2 * i + 1] + 1j * d[:, 2 * i + 2] for i, n in enumerate(names)}
 
 
 def read_published_solution(directory: str | Path) -> dict[str, NDArray[Any]]:
@@ -240,6 +242,9 @@ def load_edges3_run(
 ) -> CalibrationData:
     """An EDGES-3 run as :class:`CalibrationData` with sources ``amb, hot, open, short``.
 
+    :func:`calibration.edges_import.import_edges` with the settings of day 2022-316 (its
+    file names, 306.5 K and 393.22 K, the hot load's UT-141C-SP cable).
+
     Names follow the files (``amb``: the ambient, i.e. cold, load). Only T* is stored, so
     the Dicke spectra are pseudo-powers ``P_load = 300``, ``P_ns = 1300``, ``P_src = T*``,
     giving ``Q = (T* - 300) / 1000`` exactly. Their scale lacks the receiver's own noise,
@@ -268,51 +273,15 @@ def load_edges3_run(
     CalibrationData
         ``metadata``: ``n_spectra``, headers, ``channel_spacing_hz``, ``hot_load_gain``.
     """
-    directory = Path(directory)
-    spectra = {name: read_spectrum(directory / f"sp{name}.txt") for name in LOADS}
-    freq = spectra["amb"][0]
-    mask = (freq >= band_mhz[0] * 1e6 - 1.0) & (freq <= band_mhz[1] * 1e6 + 1.0)
-    freq = freq[mask]
-    if use_modelled_s11:
-        f_mod, s11 = read_modelled_s11(directory / "s11_modelled.txt")
-        idx = np.minimum(np.searchsorted(f_mod, freq), f_mod.size - 1)
-        if not np.allclose(f_mod[idx], freq, rtol=0.0, atol=1.0):
-            raise FileFormatError(f"s11_modelled.txt does not cover {band_mhz} MHz on our grid")
-        s11 = {k: v[idx] for k, v in s11.items()}
-    else:
-        s11 = {}
-        for name in NAMES:
-            f_raw, g = read_s11_csv(directory / f"s11{name}.csv")
-            s11[name] = np.asarray(CubicSpline(f_raw, g)(freq), dtype=complex)
+    from .edges_import import CableLoss, EdgesImport, import_edges  # it builds on this module
+
     if q_variance not in ("empirical", "radiometer"):
         raise ValueError(f"q_variance must be 'empirical' or 'radiometer', got {q_variance!r}")
-    gain = coax_power_gain(freq, s11["hot"]) if hot_load_loss else np.ones(freq.size)
-    t_hot = gain * T_HOT_K + (1 - gain) * T_COLD_K
-    temps = {"amb": T_COLD_K, "hot": t_hot, "open": T_COLD_K, "short": T_COLD_K}
-    sources = {}
-    for name, (f_load, t_all, n_spec, _) in spectra.items():
-        if f_load.shape != mask.shape or not np.array_equal(f_load[mask], freq):
-            raise FileFormatError(f"sp{name}.txt is not on the frequency grid of spamb.txt")
-        t = t_all[mask]
-        var = empirical_q_variance(t) if q_variance == "empirical" else None
-        var = radiometer_q_variance(t, n_spec) if var is None else var
-        tau = n_spec * INTEGRATION_PER_POSITION_S
-        sources[name] = SourceData(
-            name,
-            s11[name],
-            t,
-            np.full(t.size, T_LOAD_K),
-            np.full(t.size, T_LOAD_K + T_CAL_K),
-            Integration(tau, tau, tau),
-            np.full(t.shape, 1.0) * temps[name],
-            var,
-        )
-    meta = {
-        "n_spectra": {k: v[2] for k, v in spectra.items()},
-        "q_variance": q_variance,
-        "headers": {k: v[3] for k, v in spectra.items()},
-        "hot_load_gain": gain,
-        "channel_spacing_hz": float(np.median(np.diff(freq))),
-        "source": str(directory),
-    }
-    return CalibrationData(freq, s11["lna"], sources, noise_bandwidth_hz(), meta)
+    spec = EdgesImport(
+        temperatures_k={"amb": T_COLD_K, "hot": T_HOT_K, "open": T_COLD_K, "short": T_COLD_K},
+        band_mhz=band_mhz,
+        s11="modelled" if use_modelled_s11 else "raw",
+        q_variance="empirical" if q_variance == "empirical" else "radiometer",
+        hot_loss=CableLoss(UT141C) if hot_load_loss else None,
+    )
+    return import_edges(directory, spec)
