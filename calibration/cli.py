@@ -8,6 +8,9 @@
                     [--orders n_unc,n_cos,n_sin,n_NS,n_L | --max-orders ...] [--calibrators ...]
     reach-cal apply SOLUTION.h5 RUN.h5 [--source ant] [-o OUT.h5] [--csv OUT.csv]
     reach-cal summary SOLUTION.h5 [--run RUN.h5 --source ant]
+    reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,...  (calibration.cli_import)
+    reach-cal import vna DIR -o OUT_DIR --devices a,b,...
+    reach-cal validate RUN.h5 --leave-one-out [...]  (calibration.cli_validate)
 
 Files are those of :mod:`calibration.hdf5_io`. Errors an operator can act on (unreadable or
 malformed files, unusable data, an unsolvable model) print ``reach-cal: error: <message>``
@@ -20,13 +23,24 @@ import argparse
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .cli_args import (
+    ORDER_NAMES,
+    Command,
+    add_command,
+    add_solver_options,
+    names_arg,
+    output_arg,
+    solver_from_args,
+)
+from .cli_import import add_import_command
+from .cli_validate import add_validate_command
 from .data import CalibrationData, SourceData
 from .errors import CalibrationError, InvalidDataError
 from .hdf5_io import (
@@ -37,47 +51,13 @@ from .hdf5_io import (
     write_run,
     write_solution,
 )
-from .model_fit import OrderChoice
 from .noise_floor import noise_floor
 from .noise_waves import PARAMETERS, design_terms, source_temperature
-from .polynomial_model import Orders, coefficient_slices
-from .radiometric_solver import solve_radiometric
+from .polynomial_model import coefficient_slices
 from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .solution import CalibratedSpectrum, Solution
-from .thesis_solver import solve_thesis
 
 PROG = "reach-cal"
-ORDER_NAMES = ", ".join(PARAMETERS)
-
-
-def _orders(text: str) -> Orders:
-    """Parse ``n_unc,n_cos,n_sin,n_NS,n_L`` (argparse type)."""
-    try:
-        values = tuple(int(v) for v in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) != len(PARAMETERS) or min(values) < 0:
-        raise argparse.ArgumentTypeError(
-            f"expected {len(PARAMETERS)} comma-separated term counts >= 0 ({ORDER_NAMES}), "
-            f"got {text!r}"
-        )
-    return values  # type: ignore[return-value]
-
-
-def _names(text: str) -> tuple[str, ...]:
-    """Parse a comma-separated list of source names (argparse type)."""
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    if not names:
-        raise argparse.ArgumentTypeError("expected comma-separated source names")
-    return names
-
-
-def _output(text: str) -> str:
-    """An output path whose directory exists (argparse type): fail before the work."""
-    parent = Path(text).parent
-    if not parent.is_dir():
-        raise argparse.ArgumentTypeError(f"directory {str(parent)!r} does not exist")
-    return text
 
 
 def _rms(values: NDArray[np.float64]) -> float:
@@ -158,16 +138,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     data, _ = read_run(args.run)
     if args.calibrators:
         data = data.subset(args.calibrators)
-    choice = None
-    if args.orders is not None:
-        choice = OrderChoice.fixed(args.orders)
-    elif args.max_orders is not None:
-        if min(args.max_orders) < 1:
-            raise InvalidDataError("--max-orders must be >= 1 for every parameter")
-        choice = OrderChoice(max_orders=args.max_orders)
-    solver = solve_radiometric if args.method == "radiometric" else solve_thesis
+    solve = solver_from_args(args)
     start = time.perf_counter()
-    solution = solver(data, choice, basis_kind=args.basis)
+    solution = solve(data)
     elapsed = time.perf_counter() - start
     solution = replace(
         solution,
@@ -304,13 +277,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def command(name: str, func: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=(func.__doc__ or "").split("\n")[0], description=func.__doc__)
-        p.set_defaults(func=func)
-        return p
+    def command(name: str, func: Command) -> argparse.ArgumentParser:
+        return add_command(sub, name, func)
 
     sim = command("simulate", cmd_simulate)
-    sim.add_argument("-o", "--output", type=_output, required=True, help="run file to write (HDF5)")
+    sim.add_argument(
+        "-o", "--output", type=output_arg, required=True, help="run file to write (HDF5)"
+    )
     sim.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     sim.add_argument(
         "--integration-s",
@@ -334,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument(
         "--calibrators",
-        type=_names,
+        type=names_arg,
         default=REACH_CALIBRATORS,
         help="comma-separated calibrators (default all twelve)",
     )
@@ -348,29 +321,26 @@ def build_parser() -> argparse.ArgumentParser:
     solve = command("solve", cmd_solve)
     solve.add_argument("run", help="run file (HDF5)")
     solve.add_argument(
-        "-o", "--output", type=_output, required=True, help="solution file to write (HDF5)"
+        "-o", "--output", type=output_arg, required=True, help="solution file to write (HDF5)"
     )
-    solve.add_argument("--method", choices=("radiometric", "thesis"), default="radiometric")
-    solve.add_argument("--basis", choices=("legendre", "power"), default="legendre")
-    orders = solve.add_mutually_exclusive_group()
-    orders.add_argument("--orders", type=_orders, help=f"fixed orders ({ORDER_NAMES})")
-    orders.add_argument(
-        "--max-orders", type=_orders, help="upper limits of the evidence search (default 8 each)"
-    )
-    solve.add_argument("--calibrators", type=_names, help="use only these calibrators")
+    add_solver_options(solve)
 
     apply = command("apply", cmd_apply)
     apply.add_argument("solution", help="solution file (HDF5)")
     apply.add_argument("run", help="run file holding the source (HDF5)")
     apply.add_argument("--source", default="ant", help="source to calibrate (default ant)")
-    apply.add_argument("-o", "--output", type=_output, help="calibrated spectrum to write (HDF5)")
-    apply.add_argument("--csv", type=_output, help="calibrated spectrum to write (CSV)")
+    apply.add_argument(
+        "-o", "--output", type=output_arg, help="calibrated spectrum to write (HDF5)"
+    )
+    apply.add_argument("--csv", type=output_arg, help="calibrated spectrum to write (CSV)")
 
     summary = command("summary", cmd_summary)
     summary.add_argument("solution", help="solution file (HDF5)")
     summary.add_argument("--run", help="run file: report the noise floor of --source")
     summary.add_argument("--source", default="ant", help="source of --run (default ant)")
     summary.add_argument("--top", type=int, default=5, help="evidence-table rows to show")
+    add_import_command(sub)
+    add_validate_command(sub)
     return parser
 
 

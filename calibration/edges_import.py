@@ -315,7 +315,8 @@ def _loss_name(loss: MeasuredLoss | CableLoss | None) -> str:
         return "none"
     if isinstance(loss, MeasuredLoss):
         return f"measured gain table {loss.origin}"
-    return f"cable model {dict(loss.cable)}"
+    changed = {k: v for k, v in loss.cable.items() if UT141C.get(k) != v}
+    return "cable model UT-141C-SP" + (f" with {changed}" if changed else "")
 
 
 def _modelled_on_grid(
