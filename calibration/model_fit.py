@@ -84,6 +84,7 @@ def fit(
     allow_prior_dominated: bool = False,
     starts: Sequence[Orders] = (),
     average: bool = True,
+    skipped: dict[Orders, str] | None = None,
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """Posterior of the chosen (or evidence-best) model and the evidence table.
 
@@ -91,11 +92,13 @@ def fit(
     NIG prior's coefficient covariance is ``s^2 V_0``). Fixed orders that the data leave
     unconstrained raise :class:`IllPosedError` unless ``allow_prior_dominated``. With a
     :class:`ShrinkagePrior`, ``average`` mixes the models that carry the weight; without
-    it, only the best model's prior scales.
+    it, only the best model's prior scales. Models the search had to pass over (no
+    finite evidence) are recorded in ``skipped`` with the reason, and do not stop it.
     """
+    skipped = {} if skipped is None else skipped
     if isinstance(prior, ShrinkagePrior):
         return _fit_shrinkage(
-            normal, choice, prior, scale_prior, allow_prior_dominated, starts, average
+            normal, choice, prior, scale_prior, allow_prior_dominated, starts, average, skipped
         )
 
     def posterior(orders: Orders) -> LinearPosterior:
@@ -111,7 +114,8 @@ def fit(
     def log_evidence(orders: Orders) -> float:
         try:
             return posterior(orders).log_evidence
-        except IllPosedError:
+        except IllPosedError as err:
+            skipped[orders] = str(err)
             return -np.inf
 
     result = search_orders(
@@ -136,13 +140,17 @@ def _fit_shrinkage(
     allow_prior_dominated: bool,
     starts: Sequence[Orders],
     average: bool,
+    skipped: dict[Orders, str],
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """:func:`fit` with the prior scale marginalised and the models averaged."""
     grids: dict[Orders, np.ndarray] = {}
 
     def log_evidence(orders: Orders) -> float:
         grids[orders] = log_evidence_scales(normal, orders, prior, scale_prior)
-        return marginal_log_evidence(grids[orders])
+        value = marginal_log_evidence(grids[orders])
+        if not np.isfinite(value):
+            skipped[orders] = "the data and prior give it no finite evidence at any prior scale"
+        return value
 
     if choice.orders is not None:
         if not allow_prior_dominated:
@@ -174,10 +182,17 @@ class FitResult:
     normal: NormalEquations
     max_orders: Orders
     at_ceiling: tuple[str, ...]
+    skipped: dict[Orders, str]
 
-    def limits_metadata(self) -> dict[str, list[int] | list[str]]:
-        """The order limits searched and the parameters left at the hard ceiling."""
-        return {"order_limits": list(self.max_orders), "orders_at_ceiling": list(self.at_ceiling)}
+    def limits_metadata(self) -> dict[str, object]:
+        """The order limits searched, the parameters left at the ceiling, models skipped."""
+        return {
+            "order_limits": list(self.max_orders),
+            "orders_at_ceiling": list(self.at_ceiling),
+            "skipped_models": [
+                {"orders": list(o), "reason": r} for o, r in self.skipped.items()
+            ],
+        }
 
 
 def fit_extending(
@@ -202,6 +217,7 @@ def fit_extending(
     best: tuple[Orders, ...] = ()
     while True:
         normal = build(largest)
+        skipped: dict[Orders, str] = {}
         post, part = fit(
             normal,
             replace(choice, max_orders=largest) if choice.orders is None else choice,
@@ -211,6 +227,7 @@ def fit_extending(
             allow_prior_dominated,
             starts=best,
             average=average,
+            skipped=skipped,
         )
         if isinstance(prior, ShrinkagePrior):
             table = dict(part)
@@ -226,7 +243,7 @@ def fit_extending(
         grow = [k for k in hit if largest[k] < choice.ceiling]
         if not grow:
             names = tuple(PARAMETERS[k] for k in hit)
-            return FitResult(post, table, normal, largest, names)
+            return FitResult(post, table, normal, largest, names, skipped)
         largest = as_orders(
             [
                 min(m + choice.extend_step, choice.ceiling) if k in grow else m

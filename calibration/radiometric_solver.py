@@ -41,7 +41,7 @@ to second order in that difference (about 1e-8 of T_NS).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,7 +51,12 @@ from .basis import BasisKind, PolynomialBasis
 from .conjugate import CoefficientPrior, ScalePrior
 from .data import CalibrationData
 from .errors import IllPosedError
-from .model_fit import OrderChoice, fit_extending
+from .identifiability import (
+    check_determined,
+    require_positive_ns,
+    require_temperature_contrast,
+)
+from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
@@ -91,8 +96,8 @@ def linearise(
     t_ns0 = theta0[INDEX["NS"]]
     if np.any(t_ns0 <= 0):
         raise IllPosedError(
-            "the noise-source temperature came out <= 0 K: the calibrators do not constrain "
-            "T_NS (check the noise-source spectra and the calibrator temperatures)"
+            "cannot linearise about T_NS <= 0 K: the operating point needs a positive "
+            "noise-source temperature at every channel"
         )
     q0 = model_q(theta0, terms, temps)
     gain = terms.x_l * t_ns0
@@ -128,6 +133,7 @@ def solve_radiometric(
     basis_kind: BasisKind = "legendre",
     iterations: int = 2,
     average: bool = True,
+    allow_prior_dominated: bool = False,
 ) -> Solution:
     """Noise-wave parameters from the radiometer-noise likelihood of Q.
 
@@ -135,6 +141,11 @@ def solve_radiometric(
     taken at the largest model before the search. ``average`` (with the default prior)
     mixes the models by evidence; the solution's metadata lists the leading models and
     their weights either way.
+
+    Parameters the data leave to the prior (:mod:`calibration.identifiability`) are listed
+    in ``metadata["prior_dominated"]``; an undetermined T_NS raises
+    :class:`~calibration.identifiability.UndeterminedError` naming it and why, unless
+    ``allow_prior_dominated`` (which also lets fixed orders exceed what the data constrain).
     """
     choice = orders or OrderChoice()
     prior = prior or RadiometricPrior()
@@ -143,6 +154,7 @@ def solve_radiometric(
             f"one calibrator ({data.names[0]!r}) cannot separate T_NS from T_L: "
             "at least two are needed (e.g. ambient and hot loads)"
         )
+    require_temperature_contrast(data)
     basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
     terms = data.terms()
     temps, q, var_q = data.stacked()
@@ -161,14 +173,30 @@ def solve_radiometric(
         start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
         normal = _normal_equations(start, b, largest, ridge(largest))
         for _ in range(iterations):
-            theta = evaluate_coefficients(normal.reference, b, largest)
+            theta = operating_point(normal, b, largest)
             normal = _normal_equations(
                 linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest), offset_var
             )
         return normal
 
+    def operating_point(normal: NormalEquations, b: FloatArray, largest: Orders) -> FloatArray:
+        theta = evaluate_coefficients(normal.reference, b, largest)
+        if np.all(theta[INDEX["NS"]] > 0):
+            return theta
+        # Few calibrators leave the largest model free to take T_NS through zero where the
+        # data pin it weakly; the evidence's models, fitted on the same equations, are the
+        # smoother point to linearise about. If they too cross zero, T_NS is undetermined.
+        within = choice if choice.orders is not None else replace(choice, max_orders=largest)
+        post, _ = fit(
+            normal, within, coefficient_prior, 1.0, prior.scale, allow_prior_dominated,
+            average=average,
+        )
+        theta = evaluate_coefficients(post.mean, b, post.orders)
+        require_positive_ns(theta[INDEX["NS"]], data)
+        return theta
+
     result = fit_extending(
-        build, choice, coefficient_prior, 1.0, prior.scale, average=average
+        build, choice, coefficient_prior, 1.0, prior.scale, allow_prior_dominated, average
     )
     posterior, table = result.posterior, result.table
     metadata: dict[str, object] = dict(result.limits_metadata())
@@ -180,7 +208,7 @@ def solve_radiometric(
         metadata["model_weights"] = [
             {"orders": list(o), "weight": round(w, 6)} for o, w in list(weights.items())[:10]
         ]
-    return Solution(
+    solution = Solution(
         method="radiometric",
         basis=basis,
         posterior=posterior,
@@ -189,3 +217,7 @@ def solve_radiometric(
         calibrators=tuple(data.names),
         metadata=metadata,
     )
+    metadata["prior_dominated"] = check_determined(
+        solution, data, coefficient_prior, allow_prior_dominated
+    )
+    return replace(solution, metadata=metadata)

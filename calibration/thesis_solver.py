@@ -20,13 +20,14 @@ by calibrator and channel, and one ``sigma`` cannot describe it. See
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .basis import BasisKind, PolynomialBasis
 from .conjugate import CoefficientPrior, ScalePrior
 from .data import CalibrationData
+from .identifiability import check_determined, require_temperature_contrast
 from .model_fit import OrderChoice, fit_extending
 from .normal_equations import NormalEquations, build_normal_equations
 from .polynomial_model import Orders
@@ -80,6 +81,8 @@ def solve_thesis(
             ridge=prior.sigma_p_k**2 / var0,
         )
 
+    if not allow_prior_dominated:
+        require_temperature_contrast(data)
     result = fit_extending(
         build,
         choice,
@@ -89,7 +92,7 @@ def solve_thesis(
         allow_prior_dominated,
     )
     posterior = result.posterior
-    return Solution(
+    solution = Solution(
         method="thesis",
         basis=basis,
         posterior=posterior,
@@ -98,3 +101,5 @@ def solve_thesis(
         calibrators=tuple(data.names),
         metadata={"sigma_k": float(np.sqrt(posterior.noise_variance)), **result.limits_metadata()},
     )
+    dominated = check_determined(solution, data, prior.coefficients, allow_prior_dominated)
+    return replace(solution, metadata={**solution.metadata, "prior_dominated": dominated})

@@ -1,0 +1,176 @@
+"""Does the data determine each noise-wave parameter? Checked before a solution is returned.
+
+A conjugate posterior always exists: where the data leave a direction free, the prior
+fills it in, and the posterior is the prior's answer with the prior's width. Two cases
+are physical and common:
+
+* **T_NS with every calibrator at one temperature.** The noise-wave equation (eq. 3.27)
+  then has an exact one-parameter degeneracy: the power scale. With ``T_i = T_0`` for
+  all ``i``, every ``Theta_b = Theta_0 + b (Theta - Theta_0)`` with ``T_NS,0 = 0`` fits
+  the same ``Q`` (the receiver sees only ratios of powers), so ``T_NS`` is set by
+  temperature *contrast* between calibrators seen through low reflection (an ambient and
+  a hot load). ``T_NS`` also enters nonlinearly (the radiometric solver linearises
+  about it), so a ``T_NS`` the data do not pin is refused, not reported.
+* **T_unc, T_cos, T_sin without reflective calibrators.** Their design terms scale with
+  ``|Gamma|`` and ``|Gamma|^2``; matched loads alone leave them at their prior. These
+  enter linearly, so the posterior is honest: its width is the prior's. They are
+  reported as prior-dominated (the solution's ``metadata["prior_dominated"]``), and every
+  spectrum calibrated with the solution carries that width in its error bars.
+
+The criterion compares each parameter's posterior standard deviation with its prior's
+(the constant term's, which is the widest: a Legendre ``P_0 = 1`` term moves the whole
+curve): a parameter whose posterior is at least :data:`PRIOR_DOMINATED` of its prior
+width has had its variance reduced by the data less than a hundredfold.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .conjugate import CoefficientPrior
+from .data import CalibrationData
+from .errors import IllPosedError
+from .noise_waves import INDEX, PARAMETERS
+from .shrinkage import ShrinkagePrior
+
+if TYPE_CHECKING:
+    from .solution import Solution
+
+FloatArray = NDArray[np.float64]
+
+#: Posterior sd / prior sd at or above which a parameter is the prior's, not the data's.
+PRIOR_DOMINATED = 0.1
+#: Median ``|Gamma|`` below which a calibrator counts as matched in messages.
+MATCHED = 0.3
+#: T_NS's posterior sd may reach this fraction of T_NS itself. Beyond it the Gauss-Newton
+#: step about T_NS is no longer a small correction and the posterior is not a Gaussian one.
+NS_RELATIVE_LIMIT = 0.1
+
+
+class UndeterminedError(IllPosedError):
+    """The data do not determine ``parameter`` (a name of :data:`PARAMETERS`)."""
+
+    def __init__(self, message: str, parameter: str) -> None:
+        self.parameter = parameter
+        super().__init__(message)
+
+
+def temperatures_line(data: CalibrationData) -> str:
+    """The calibrators' temperatures (band median) and their spread, for messages."""
+    temps, _, _ = data.stacked()
+    medians = np.median(temps, axis=1)
+    listed = ", ".join(f"{n} {t:.1f} K" for n, t in zip(data.names, medians, strict=True))
+    spread = float(np.max(np.ptp(temps, axis=0)))
+    return f"the calibrators' temperatures: {listed}; largest spread {spread:.2f} K"
+
+
+def _why_ns(data: CalibrationData) -> str:
+    temps, _, _ = data.stacked()
+    matched = [
+        f"{name} {np.median(t):.1f} K"
+        for name, t, src in zip(data.names, temps, data.sources.values(), strict=True)
+        if np.median(np.abs(src.gamma)) < MATCHED
+    ]
+    return (
+        f"{temperatures_line(data)}; matched (|Gamma| < {MATCHED}): "
+        f"{', '.join(matched) or 'none'}. T_NS and T_L are set by the contrast between "
+        "calibrators at different temperatures seen through low reflection "
+        "(an ambient and a hot load)"
+    )
+
+
+def require_temperature_contrast(data: CalibrationData) -> None:
+    """Refuse calibrators that all sit at one temperature (module docstring).
+
+    "One temperature" is a spread no larger than five times the largest stated
+    thermometry error (``SourceData.temperature_std_k``), or exactly none.
+    """
+    temps, _, _ = data.stacked()
+    spread = float(np.max(np.ptp(temps, axis=0)))
+    stated = float(np.sqrt(np.max(data.temperature_variances())))
+    if spread <= max(5.0 * stated, 1e-9 * float(np.max(np.abs(temps)))):
+        raise UndeterminedError(
+            f"T_NS is not determined by the calibrators {data.names}: every one is at the "
+            f"same temperature, so only the ratio of powers is measured, not their scale "
+            f"({_why_ns(data)})",
+            "NS",
+        )
+
+
+def require_positive_ns(t_ns: FloatArray, data: CalibrationData) -> None:
+    """Refuse an operating point whose T_NS curve reaches zero: the data do not pin it."""
+    bad = t_ns <= 0
+    if np.any(bad):
+        f = data.freq_hz[bad] / 1e6
+        raise UndeterminedError(
+            f"T_NS is not determined by the calibrators {data.names}: their best fit takes "
+            f"it to <= 0 K in {int(bad.sum())} of {bad.size} channels "
+            f"({f.min():.1f}-{f.max():.1f} MHz) ({_why_ns(data)})",
+            "NS",
+        )
+
+
+def constant_prior_sd(prior: CoefficientPrior | ShrinkagePrior) -> FloatArray:
+    """Prior sd of each parameter's constant term (K), ``(5,)``."""
+    if isinstance(prior, ShrinkagePrior):
+        return np.full(len(PARAMETERS), prior.constant_sd_k)
+    _, variances = prior.vectors((1,) * len(PARAMETERS))
+    return np.sqrt(variances)
+
+
+def determination(
+    solution: Solution, freq_hz: FloatArray, prior_sd_k: Sequence[float] | FloatArray
+) -> dict[str, float]:
+    """Worst ratio, over the band, of each parameter's posterior sd to its prior sd."""
+    sd = solution.parameter_std(freq_hz)
+    return {
+        p: float(np.max(sd[k]) / prior_sd_k[k]) for k, p in enumerate(PARAMETERS)
+    }
+
+
+def check_determined(
+    solution: Solution,
+    data: CalibrationData,
+    prior: CoefficientPrior | ShrinkagePrior,
+    allow_prior_dominated: bool = False,
+) -> dict[str, float]:
+    """The prior-dominated parameters and their ratios; raise if T_NS is not determined.
+
+    T_NS is refused when its posterior sd reaches :data:`NS_RELATIVE_LIMIT` of its value
+    anywhere in the band (``allow_prior_dominated`` reports it instead). The others are
+    returned when their ratio (:func:`determination`) reaches :data:`PRIOR_DOMINATED`.
+    """
+    freq = data.freq_hz
+    t_ns = solution.evaluate(freq)[INDEX["NS"]]
+    sd_ns = solution.parameter_std(freq)[INDEX["NS"]]
+    relative = np.full(t_ns.shape, np.inf)
+    np.divide(sd_ns, t_ns, out=relative, where=t_ns > 0)
+    worst = int(np.argmax(relative))
+    ratios = determination(solution, freq, constant_prior_sd(prior))
+    dominated = {p: round(r, 4) for p, r in ratios.items() if r >= PRIOR_DOMINATED}
+    if relative[worst] >= NS_RELATIVE_LIMIT:
+        if not allow_prior_dominated:
+            raise UndeterminedError(
+                f"T_NS is not determined by the calibrators {data.names}: its posterior sd "
+                f"is {sd_ns[worst]:.3g} K against a value of {t_ns[worst]:.4g} K at "
+                f"{freq[worst] / 1e6:.1f} MHz ({_why_ns(data)})",
+                "NS",
+            )
+        dominated["NS"] = round(float(relative[worst]), 4)
+    return dominated
+
+
+def prior_dominated_line(solution: Solution) -> str:
+    """A warning for a summary, naming the prior-dominated parameters (empty if none)."""
+    dominated = solution.metadata.get("prior_dominated") or {}
+    if not dominated:
+        return ""
+    listed = ", ".join(f"T_{p} ({r:.0%} of its prior width)" for p, r in dominated.items())
+    return (
+        f"warning: the data do not determine {listed}: these are the prior's, and the "
+        "error bars of calibrated spectra carry that width"
+    )
