@@ -1,0 +1,143 @@
+"""RFI flags (calibration.rfi): injected spikes and bursts found, clean channels left alone.
+
+Spikes are 1-3 channels wide at 8-100 sigma of the radiometer noise (log-uniform), on a
+REACH-like bandpass (a sky power law with a 0.5 % ripple of 10 MHz period); bursts last one
+spectrum and raise 128-512 contiguous channels by 1-3 sigma each.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.errors import InvalidDataError
+from calibration.rfi import flag_dynamic_spectrum, flag_spectrum, robust_sigma
+
+SEEDS = range(6)
+AMPLITUDES = [(8.0, 12.0), (12.0, 30.0), (30.0, 100.0)]
+
+
+def bandpass(n):
+    f = np.linspace(50e6, 130e6, n)
+    return (300 + 2000 * (f / 75e6) ** -2.5) * (1 + 0.005 * np.sin(2 * np.pi * f / 10e6))
+
+
+def spike_positions(rng, n_channels, count):
+    """``count`` spikes (start, width) at least 4 channels apart, away from the edges."""
+    starts = np.sort(rng.choice(np.arange(20, n_channels - 20, 8), count, replace=False))
+    return [(int(s), int(rng.integers(1, 4))) for s in starts]
+
+
+def inject_spikes(rng, x, sigma, positions, amplitudes, row=None):
+    for (start, width), amp in zip(positions, rng.uniform(*np.log(amplitudes), len(positions)),
+                                   strict=True):
+        where = slice(start, start + width)
+        scale = x[where] if row is None else x[row, where]
+        bump = np.exp(amp) * sigma * scale
+        if row is None:
+            x[where] += bump
+        else:
+            x[row, where] += bump
+
+
+def spike_mask(shape, positions, rows=None):
+    mask = np.zeros(shape, bool)
+    for i, (start, width) in enumerate(positions):
+        if rows is None:
+            mask[start:start + width] = True
+        else:
+            mask[rows[i], start:start + width] = True
+    return mask
+
+
+@pytest.mark.parametrize("amplitudes", AMPLITUDES)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_spikes_in_an_averaged_spectrum(seed, amplitudes):
+    rng = np.random.default_rng(seed)
+    n, sigma = 4096, 1e-3
+    x = bandpass(n) * (1 + sigma * rng.standard_normal(n))
+    positions = spike_positions(rng, n, 60)
+    inject_spikes(rng, x, sigma, positions, amplitudes)
+    flags = flag_spectrum(x)
+    caught = [np.all(flags[s:s + w]) for s, w in positions]
+    clean = ~spike_mask(n, positions)
+    assert np.mean(caught) >= 0.99, f"caught {np.mean(caught):.3f}"
+    assert np.mean(flags[clean]) <= 0.01, f"clean flagged {np.mean(flags[clean]):.4f}"
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_flags_given_are_kept_and_data_untouched(seed):
+    rng = np.random.default_rng(seed)
+    x = bandpass(1024) * (1 + 1e-3 * rng.standard_normal(1024))
+    before = x.copy()
+    given = np.zeros(1024, bool)
+    given[:40] = True
+    flags = flag_spectrum(x, given)
+    assert np.all(flags[:40])
+    np.testing.assert_array_equal(x, before)
+    grown = flag_spectrum(np.where(np.arange(1024) == 500, 2 * x, x), grow=2)
+    assert np.all(grown[498:503])
+
+
+def dynamic_run(rng, n_t=48, n_c=1024, sigma=0.01):
+    gain = 1 + 0.02 * rng.standard_normal((n_t, 1))  # gain drifts between spectra
+    return bandpass(n_c)[None, :] * gain * (1 + sigma * rng.standard_normal((n_t, n_c)))
+
+
+@pytest.mark.parametrize("amplitudes", AMPLITUDES)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_spikes_and_bursts_in_a_dynamic_spectrum(seed, amplitudes):
+    rng = np.random.default_rng(100 + seed)
+    n_t, n_c, sigma = 48, 1024, 0.01
+    x = dynamic_run(rng, n_t, n_c, sigma)
+    rows = rng.integers(0, n_t, 60)
+    positions = spike_positions(rng, n_c, 60)
+    for row, pos in zip(rows, positions, strict=True):
+        inject_spikes(rng, x, sigma, [pos], amplitudes, row=row)
+    burst = np.zeros(x.shape, bool)
+    for row in rng.choice(n_t, 3, replace=False):
+        start, width = int(rng.integers(0, n_c - 512)), int(rng.integers(128, 513))
+        burst[row, start:start + width] = True
+        x[row, start:start + width] *= 1 + rng.uniform(1, 3) * sigma
+    result = flag_dynamic_spectrum(x)
+    caught = [np.all(result.flags[r, s:s + w]) for r, (s, w) in zip(rows, positions, strict=True)]
+    assert np.mean(caught) >= 0.99, f"caught {np.mean(caught):.3f}"
+    assert np.mean(result.flags[burst]) >= 0.9, f"burst pixels {np.mean(result.flags[burst]):.3f}"
+    assert np.all(np.any(result.bursts, axis=1)[np.any(burst, axis=1)])
+    clean = ~(spike_mask(x.shape, positions, rows) | burst)
+    assert np.mean(result.flags[clean]) <= 0.01, f"clean flagged {np.mean(result.flags[clean]):.4f}"
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_persistent_line_is_flagged_at_every_time(seed):
+    rng = np.random.default_rng(200 + seed)
+    x = dynamic_run(rng)
+    x[:, 300] *= 1.05  # 5 sigma per spectrum, always on: the time median absorbs it
+    result = flag_dynamic_spectrum(x)
+    assert np.all(result.lines[:, 300])
+    assert np.mean(result.flags[:, np.arange(1024) != 300]) <= 0.01
+    assert "persistent line" in str(result)
+
+
+def test_clean_data_is_hardly_flagged():
+    rng = np.random.default_rng(5)
+    result = flag_dynamic_spectrum(dynamic_run(rng))
+    assert result.fraction <= 1e-3
+
+
+def test_robust_sigma_ignores_outliers():
+    rng = np.random.default_rng(6)
+    x = rng.standard_normal(100000)
+    x[:1000] = 1e6
+    assert robust_sigma(x) == pytest.approx(1.0, rel=0.02)
+
+
+def test_bad_input_is_refused():
+    with pytest.raises(InvalidDataError, match="odd window"):
+        flag_spectrum(np.ones(100), window=30)
+    with pytest.raises(InvalidDataError, match="positive"):
+        flag_spectrum(-np.ones(100))
+    with pytest.raises(InvalidDataError, match="every channel"):
+        flag_spectrum(np.ones(100), np.ones(100, bool))
+    with pytest.raises(InvalidDataError, match=">= 3 spectra"):
+        flag_dynamic_spectrum(np.ones((2, 100)))
