@@ -56,7 +56,7 @@ MAD_TO_SIGMA = 1.4826
 
 
 def robust_sigma(values: ArrayLike, axis: int | None = None) -> FloatArray:
-    """``1.4826 median|x - median x|``: a Gaussian's sigma, unmoved by a few outliers (NaN skipped)."""
+    """``1.4826 median|x - median x|``: a Gaussian's sigma, unmoved by outliers; NaN skipped."""
     x = np.asarray(values, dtype=float)
     centre = np.nanmedian(x, axis=axis, keepdims=True)
     return np.asarray(MAD_TO_SIGMA * np.nanmedian(np.abs(x - centre), axis=axis), dtype=float)
