@@ -11,6 +11,7 @@ with the basis functions (eq. 3.40)::
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -42,11 +43,21 @@ def coefficient_slices(orders: Sequence[int]) -> list[slice]:
 
 
 def full_indices(orders: Sequence[int], max_orders: Sequence[int]) -> NDArray[np.intp]:
-    """Positions of an ``orders`` model's coefficients inside a ``max_orders`` vector."""
+    """Positions of an ``orders`` model's coefficients inside a ``max_orders`` vector.
+
+    Read-only and cached: the order search asks for the same few hundred per solve.
+    """
+    return _full_indices(tuple(map(int, orders)), tuple(map(int, max_orders)))
+
+
+@functools.lru_cache(maxsize=4096)
+def _full_indices(orders: tuple[int, ...], max_orders: tuple[int, ...]) -> NDArray[np.intp]:
     starts = np.concatenate([[0], np.cumsum(max_orders)[:-1]])
-    return np.concatenate(
+    idx = np.concatenate(
         [np.arange(s, s + n) for s, n in zip(starts, orders, strict=True)]
     ).astype(np.intp)
+    idx.flags.writeable = False
+    return idx
 
 
 def design_rows(

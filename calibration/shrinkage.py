@@ -45,6 +45,7 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import cho_factor, cho_solve
 from scipy.special import gammaln
 
 from .conjugate import LOG_2PI, ScalePrior
@@ -199,43 +200,41 @@ def log_evidence_scales(
     k = gram[np.ix_(c, c)] + np.eye(c.size) / v_c
     u_c = linear[c] - ref_s[c] / v_c
     try:
-        k_chol = np.linalg.cholesky(k)
+        k_factor = cho_factor(k, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
-        return np.full(prior.n_scales, -np.inf)
+        return np.full(prior.n_grid, -np.inf)
     g_ch = gram[np.ix_(c, h)]
-    # K^-1 [u_C | G_CH] in two triangular solves
-    solved = np.linalg.solve(k_chol.T, np.linalg.solve(k_chol, np.column_stack((u_c, g_ch))))
+    solved = cho_solve(k_factor, np.column_stack((u_c, g_ch)), check_finite=False)
     k_inv_u, k_inv_g = solved[:, 0], solved[:, 1:]
     q_c = rr + float(ref_s[c] @ ref_s[c]) / v_c - float(u_c @ k_inv_u)
-    log_det_k = 2.0 * float(np.sum(np.log(np.diag(k_chol))))
-    t = np.tile(_precisions(prior), len(prior.decays))
+    log_det_k = 2.0 * float(np.sum(np.log(np.diag(k_factor[0]))))
+    t = _precisions(prior)
     n_h = h.size
     if n_h:
         schur = gram[np.ix_(h, h)] - g_ch.T @ k_inv_g
         schur = 0.5 * (schur + schur.T)
         p_h = linear[h] - g_ch.T @ k_inv_u
-        ref_h = ref_s[h]
         power = np.concatenate([np.arange(1, n) - 1.0 for n in orders if n > 1])
-        lam = np.empty((t.size, n_h))
-        p = np.empty((t.size, n_h))
-        r = np.empty((t.size, n_h))
-        n = prior.n_scales
-        for i, decay in enumerate(prior.decays):
-            # prior precision t D with D^(1/2) = d: S + t D = d (S / d d^T + t I) d
-            d = np.minimum(decay**-power, MAX_NARROWING)
-            values, vectors = np.linalg.eigh(schur / np.outer(d, d))
-            # Rounding leaves eigenvalues uncertain by ~eps * the largest; below that they
-            # are zero (the data leave the direction to the prior), never negative.
-            values = np.maximum(values, 64 * np.finfo(float).eps * max(values[-1], 0.0))
-            block = slice(i * n, (i + 1) * n)
-            lam[block], p[block], r[block] = values, vectors.T @ (p_h / d), vectors.T @ (ref_h * d)
-        denominator = lam + t[:, None]
+        # prior precision t D with D^(1/2) = d: S + t D = d (S / d d^T + t I) d, one
+        # eigendecomposition per decay, all in one call
+        d = np.minimum(np.asarray(prior.decays)[:, None] ** -power, MAX_NARROWING)
+        values, vectors = np.linalg.eigh(schur / (d[:, :, None] * d[:, None, :]))
+        # Rounding leaves eigenvalues uncertain by ~eps * the largest; below that they
+        # are zero (the data leave the direction to the prior), never negative.
+        floor = 64 * np.finfo(float).eps * np.maximum(values[:, -1:], 0.0)
+        lam = np.maximum(values, floor)[:, None, :]  # (decay, 1, n_h)
+        rotated = np.swapaxes(vectors, 1, 2) @ np.stack((p_h / d, ref_s[h] * d), axis=2)
+        p, r = rotated[:, None, :, 0], rotated[:, None, :, 1]
+        tt = t[None, :, None]
+        denominator = lam + tt  # (decay, scale, n_h)
         with np.errstate(divide="ignore", invalid="ignore"):
-            terms = t[:, None] * (lam * r * r + 2.0 * p * r) - p * p
-            q_h = np.sum(terms / denominator, axis=1)
-            log_det_h = np.sum(np.log(denominator), axis=1)
-        bad = np.any(denominator <= 0, axis=1)
+            terms = tt * (lam * r * r + 2.0 * p * r) - p * p
+            q_h = np.sum(terms / denominator, axis=2).ravel()
+            log_det_h = np.sum(np.log(denominator), axis=2).ravel()
+        bad = np.any(denominator <= 0, axis=2).ravel()
+        t = np.tile(t, len(prior.decays))
     else:
+        t = np.tile(t, len(prior.decays))
         q_h, log_det_h, bad = np.zeros_like(t), np.zeros_like(t), np.zeros(t.size, dtype=bool)
     log_v0 = c.size * np.log(v_c) - n_h * np.log(t)  # log|D| cancels against log|Lambda_H|
     q_min = np.maximum(q_c + q_h, 0.0)
