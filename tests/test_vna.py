@@ -8,8 +8,14 @@ import time
 import numpy as np
 import pytest
 
+from calibration.cal_kit import CalKit, OpenStandard
 from reach_receiver.clock import ManualClock
 from reach_receiver.devices.vna import S11Measurement, ScpiErrorEntry, SweepSettings, Vna
+from reach_receiver.devices.vna_host_cal import (
+    HostCalibration,
+    calibrate_on_host,
+    measure_raw,
+)
 from reach_receiver.errors import (
     ConfigError,
     ConnectionLost,
@@ -394,3 +400,62 @@ def test_drop_while_measuring_a_standard_measures_it_again(sim, vna, port, clock
     result = measure(vna, port, "dut")
     sigma = predicted_sigma(sim, clock, SETTINGS, dut(result.freq_hz))
     assert np.max(np.abs(result.s11 - dut(result.freq_hz)) / sigma) < 4.5
+
+
+# --- host-side calibration --------------------------------------------------------------
+
+
+def test_host_side_calibration_recovers_truth_within_noise(sim, vna, port, clock):
+    """Raw standards solved by the engine correct a raw DUT sweep to the truth."""
+    cal = calibrate_on_host(vna, port.connect)
+    port.connect("dut")
+    raw = measure_raw(vna)
+    assert not raw.calibrated
+    assert not vna.calibration_active()
+    result = cal.correct(raw)
+    truth = dut(result.freq_hz)
+    z = np.abs(result.s11 - truth) / predicted_sigma(sim, clock, SETTINGS, truth)
+    assert result.calibrated
+    assert 0.7 < np.mean(z**2) < 1.35  # as for the instrument's own correction
+    assert np.max(z) < 4.5
+
+
+def test_raw_sweep_restores_the_instruments_correction(vna, port):
+    """A raw sweep between corrected ones leaves the instrument's calibration on."""
+    calibrate(vna, port)
+    port.connect("dut")
+    raw = measure_raw(vna)
+    assert not raw.calibrated
+    assert vna.calibration_active()
+    corrected = vna.measure_s11()
+    assert corrected.calibrated
+    assert np.max(np.abs(corrected.s11 - dut(corrected.freq_hz))) < 0.05
+    assert np.min(np.abs(raw.s11 - dut(raw.freq_hz))) > 0.01
+
+
+def test_host_side_calibration_with_a_modelled_kit_differs_from_ideal(sim, vna, port):
+    """The kit model enters the correction: a 40 fF open moves the result by its phase."""
+    kit = CalKit(open=OpenStandard(c0=40.0))
+    ideal = calibrate_on_host(vna, port.connect)
+    modelled = HostCalibration(ideal.freq_hz, ideal.raw, kit, solve_one_port(
+        np.stack([ideal.raw[s] for s in ("short", "open", "load")]),
+        kit.reflections(ideal.freq_hz),
+    ), ideal.timestamp)
+    port.connect("dut")
+    raw = measure_raw(vna)
+    shift = np.abs(modelled.correct(raw).s11 - ideal.correct(raw).s11)
+    assert np.max(shift) > 1e-3
+
+
+def test_host_correction_refuses_a_corrected_sweep(vna, port):
+    cal = calibrate_on_host(vna, port.connect)
+    vna.calibrate_sol(port.connect)
+    with pytest.raises(DeviceError, match="already corrected"):
+        cal.correct(vna.measure_s11())
+
+
+def test_a_stuck_switch_is_named_by_the_host_side_calibration(vna):
+    """Every standard reads the same DUT: refused before solving, naming the standards."""
+    with pytest.raises(DeviceError, match=r"short and open read alike.*MHz"):
+        calibrate_on_host(vna, lambda name: None)
+

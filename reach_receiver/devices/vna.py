@@ -15,7 +15,8 @@ SCPI used (Copper Mountain TRVNA software, socket server on port 5025; design.md
 * measurement: ``TRIG:SOUR BUS``, ``TRIG:SEQ:SING``, ``*OPC?``, then ``SENS1:FREQ:DATA?``
   and ``CALC1:TRAC1:DATA:SDAT?`` (corrected data, re/im interleaved);
 * calibration: ``SENS1:CORR:COLL:METH:SOLT1 1``, ``SENS1:CORR:COLL:{SHOR,OPEN,LOAD} 1``,
-  ``SENS1:CORR:COLL:SAVE`` (each followed by ``*OPC?``), ``SENS1:CORR:STAT?``;
+  ``SENS1:CORR:COLL:SAVE`` (each followed by ``*OPC?``), ``SENS1:CORR:STAT?``, and
+  ``SENS1:CORR:STAT 0|1`` for raw sweeps (the host-side path, :mod:`.vna_host_cal`);
 * state files: ``MMEM:STOR:STYP CST``, ``MMEM:STOR "<name>"``, ``MMEM:LOAD "<name>"``;
 * errors: ``SYST:ERR?`` answering ``<code>,"<message>"`` until ``0,"No error"`` when the
   software supports it (unconfirmed for TRVNA, so a silent instrument is coped with).
@@ -313,6 +314,15 @@ class Vna:
     def calibration_active(self) -> bool:
         """Whether the instrument applies error correction (``SENS1:CORR:STAT?``)."""
         return bool(self._retry("read correction", lambda: self._query_number("SENS1:CORR:STAT?")))
+
+    def set_correction(self, on: bool) -> None:
+        """Switch the instrument's error correction (``SENS1:CORR:STAT``) and check it took.
+
+        Switching it on without a calibration leaves it off; that raises.
+        """
+        self._retry("set correction", lambda: self._command(f"SENS1:CORR:STAT {int(on)}"))
+        if self.calibration_active() != on:
+            raise DeviceError(self.name, f"correction did not turn {'on' if on else 'off'}")
 
     # --- calibration --------------------------------------------------------------------
     def start_sol(self) -> None:
