@@ -39,6 +39,10 @@ Solution files (``format = "reach-calibration-solution"``): root attributes ``me
 ``f_lo_hz``, ``f_hi_hz``; ``/posterior`` datasets ``orders`` (5 ints: unc, cos, sin, NS, L),
 ``mean`` (K), ``scale`` (K^2), attributes ``dof``, ``log_evidence``, ``noise_variance``,
 ``chi2``, ``n_rows``; ``/evidence`` datasets ``orders`` (n_models, 5) and ``log_evidence``.
+A model-averaged posterior (:class:`~calibration.averaging.MixturePosterior`) also has
+``/posterior/components``: dataset ``weights`` and one group ``0``, ``1``, ... per component,
+each laid out as ``/posterior`` itself (its own orders), so that draws read back come from
+the mixture, not from a Gaussian with its moments.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ import h5py
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .averaging import MixturePosterior
 from .basis import PolynomialBasis
 from .conjugate import LinearPosterior
 from .data import CalibrationData, Integration, SourceData, check_source
@@ -414,19 +419,49 @@ def write_solution_group(f: Any, solution: Solution) -> None:
     b = f.create_group("basis")
     b.attrs.update({"kind": basis.kind, "f_lo_hz": basis.f_lo_hz, "f_hi_hz": basis.f_hi_hz})
     g = f.create_group("posterior")
-    g.attrs.update({k: float(getattr(post, k)) for k in _POSTERIOR_FLOATS})
-    g.attrs.update({"n_rows": int(post.n_rows), "parameters": list(PARAMETERS)})
-    g.attrs["noise_variance_units"] = (
-        "K^2" if solution.measurement_model == "homoscedastic" else "1 (scale of var Q)"
-    )
-    _dataset(g, "orders", np.asarray(post.orders, dtype=np.int64), "terms")
-    _dataset(g, "mean", post.mean, "K")
-    _dataset(g, "scale", post.scale, "K^2")
+    _write_posterior(g, post, solution.measurement_model)
+    if isinstance(post, MixturePosterior):
+        mix = g.create_group("components")
+        _dataset(mix, "weights", post.weights, "1")
+        for i, component in enumerate(post.components):
+            _write_posterior(mix.create_group(str(i)), component, solution.measurement_model)
     table = solution.evidence_table
     ev = f.create_group("evidence")
     rows = np.array(list(table), dtype=np.int64).reshape(len(table), N_PARAMETERS)
     _dataset(ev, "orders", rows, "terms")
     _dataset(ev, "log_evidence", np.array(list(table.values()), dtype=float), "nats")
+
+
+def _write_posterior(g: Any, post: LinearPosterior, measurement_model: str) -> None:
+    g.attrs.update({k: float(getattr(post, k)) for k in _POSTERIOR_FLOATS})
+    g.attrs.update({"n_rows": int(post.n_rows), "parameters": list(PARAMETERS)})
+    g.attrs["noise_variance_units"] = (
+        "K^2" if measurement_model == "homoscedastic" else "1 (scale of var Q)"
+    )
+    _dataset(g, "orders", np.asarray(post.orders, dtype=np.int64), "terms")
+    _dataset(g, "mean", post.mean, "K")
+    _dataset(g, "scale", post.scale, "K^2")
+
+
+def _read_posterior(g: Any, path: PathLike) -> LinearPosterior:
+    orders = _orders(_array(g, "orders", path), path)
+    mean = _array(g, "mean", path).astype(float)
+    scale = _array(g, "scale", path).astype(float)
+    n = sum(orders)
+    if mean.shape != (n,) or scale.shape != (n, n):
+        raise FileFormatError(f"{path}: posterior mean/scale do not match orders {orders}")
+    dof, logz, noise, chi2 = (float(_attr(g, k, path)) for k in _POSTERIOR_FLOATS)
+    posterior = LinearPosterior(
+        orders, mean, scale, dof, logz, noise, chi2, int(_attr(g, "n_rows", path))
+    )
+    if "components" not in g:
+        return posterior
+    mix = g["components"]
+    weights = _array(mix, "weights", path).astype(float)
+    components = tuple(_read_posterior(mix[str(i)], path) for i in range(weights.size))
+    if any(any(a > b for a, b in zip(c.orders, orders, strict=True)) for c in components):
+        raise FileFormatError(f"{path}: a mixture component exceeds the envelope {orders}")
+    return MixturePosterior(**vars(posterior), components=components, weights=weights)
 
 
 def read_solution(path: PathLike) -> Solution:
@@ -438,17 +473,7 @@ def read_solution(path: PathLike) -> Solution:
 def read_solution_group(f: Any, path: PathLike) -> Solution:
     """Read a solution from the open HDF5 file or group ``f``; errors name ``path``."""
     basis = _basis(_group(f, "basis", path), path)
-    g = _group(f, "posterior", path)
-    orders = _orders(_array(g, "orders", path), path)
-    mean = _array(g, "mean", path).astype(float)
-    scale = _array(g, "scale", path).astype(float)
-    n = sum(orders)
-    if mean.shape != (n,) or scale.shape != (n, n):
-        raise FileFormatError(f"{path}: posterior mean/scale do not match orders {orders}")
-    dof, logz, noise, chi2 = (float(_attr(g, k, path)) for k in _POSTERIOR_FLOATS)
-    posterior = LinearPosterior(
-        orders, mean, scale, dof, logz, noise, chi2, int(_attr(g, "n_rows", path))
-    )
+    posterior = _read_posterior(_group(f, "posterior", path), path)
     ev = _group(f, "evidence", path)
     ev_orders = _array(ev, "orders", path)
     ev_logz = _array(ev, "log_evidence", path).astype(float)

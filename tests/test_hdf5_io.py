@@ -7,6 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
+from calibration.averaging import MixturePosterior
 from calibration.errors import FileFormatError, InvalidDataError
 from calibration.hdf5_io import (
     FORMAT_VERSION,
@@ -126,6 +127,25 @@ def test_solution_round_trip_reproduces_calibration(tmp_path, run, method):
         assert f["posterior/mean"].attrs["units"] == "K"
         assert f["evidence/orders"].shape == (len(solution.evidence_table), 5)
         assert f["evidence/orders"].dtype.kind == "i"
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_averaged_solution_reads_back_as_the_same_mixture(tmp_path, seed):
+    """Components, weights and draws of a model-averaged posterior survive the file."""
+    data = simulate_run(CFG, rng=seed).data
+    solution = solve_radiometric(data, OrderChoice(max_orders=(5, 4, 5, 5, 4)))
+    post = solution.posterior
+    assert isinstance(post, MixturePosterior)
+    assert len(post.components) > 1
+    path = tmp_path / "solution.h5"
+    write_solution(path, solution)
+    back = read_solution(path).posterior
+    assert isinstance(back, MixturePosterior)
+    np.testing.assert_array_equal(back.weights, post.weights)
+    assert [c.orders for c in back.components] == [c.orders for c in post.components]
+    assert back.model_weights() == post.model_weights()
+    draws = [p.sample(500, np.random.default_rng(0)) for p in (post, back)]
+    np.testing.assert_array_equal(draws[1], draws[0])
 
 
 def test_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, run_file, run):
