@@ -15,6 +15,7 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
     thermocouples: {hot: 2}                 # source -> TC-08 port, changes to table 2.2
     daemon: {resume: true, timers: [...]}   # reachd: reach_receiver.config.daemon
+    monitoring: {cadence_s: 60, alarms: [...]}   # reachd: reach_receiver.config.monitoring
 
 ``reach-sim`` prints one of these with the simulated instruments' addresses and a
 ``simulation`` section (its compressed clock), which ``reach-run`` then shares.
@@ -45,6 +46,7 @@ from reach_receiver.frontend.layout import (
 
 from .daemon import DAEMON_KEYS, DaemonSettings, read_daemon
 from .fields import REQUIRED, Fields, closest, type_name
+from .monitoring import MONITORING_KEYS, MonitoringSettings, read_monitoring
 from .settings import DEVICE_SCHEMAS, DeviceSettings, keys_of, read_settings
 from .yaml_lines import LineDict, Problem, ProblemsError, load_yaml, with_lines
 
@@ -62,6 +64,7 @@ SECTIONS = (
     "sources",
     "thermocouples",
     "daemon",
+    "monitoring",
     "simulation",
 )
 _PLACE_KEYS = ("name", "longitude_deg", "latitude_deg")
@@ -91,6 +94,7 @@ class SiteConfig:
     sources: Mapping[str, SourcePosition] = field(default_factory=lambda: dict(REACH_SOURCES))
     thermocouples: Mapping[str, int] = field(default_factory=lambda: dict(SOURCE_THERMOCOUPLE))
     daemon: DaemonSettings = field(default_factory=DaemonSettings)
+    monitoring: MonitoringSettings = field(default_factory=MonitoringSettings)
     source: str = "<memory>"
 
     def clock(self) -> Clock:
@@ -192,6 +196,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     sources = _sources(reader)
     thermocouples = _thermocouples(reader)
     daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), source, reader.problems)
+    monitoring = read_monitoring(reader.section("monitoring", MONITORING_KEYS), reader.problems)
     if reader.problems or devices is None or band is None:
         raise SiteError(sorted(dict.fromkeys(reader.problems), key=lambda p: p.line))
     return SiteConfig(
@@ -205,6 +210,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         sources=sources,
         thermocouples=thermocouples,
         daemon=daemon,
+        monitoring=monitoring,
         source=source,
     )
 

@@ -6,6 +6,9 @@ Life cycle (:class:`Daemon`):
   marks their jobs interrupted (queueing their continuation when the site's ``resume``
   policy is on), puts the front-end in its safe state, fires the timers missed while it
   was down (per the policy), opens the control socket and tells systemd it is ready.
+* the monitor (:mod:`reach_receiver.monitor`) samples the receiver's health every
+  cadence from its own thread, with its own links while idle and at the safe points of
+  a run; the daemon takes the hardware from it before a run or a safe-state command.
 * :meth:`~Daemon.serve` is the main loop: every ``tick_s`` it feeds the watchdog (while
   healthy), starts the next queued job when idle, fires due timers, and publishes its
   status; each run goes in a worker thread through the run layer's
@@ -34,6 +37,7 @@ from typing import Any
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.errors import ConnectionLost, DeviceTimeout, ReceiverError
+from reach_receiver.monitor import Monitor
 from reach_receiver.run.instruments import Instruments
 from reach_receiver.run.resume import resumed_schedule
 from reach_receiver.run.session import RunFailed, RunSession
@@ -51,7 +55,7 @@ from .lock import HardwareLock
 from .notify import Notifier, Watchdog
 from .protocol import ControlError, reply
 from .recovery import recover_run, recover_runs
-from .states import StateMachine
+from .states import TRANSITIONS, StateMachine
 from .timers import Timers, Trigger
 
 log = logging.getLogger(__name__)
@@ -133,6 +137,11 @@ class Daemon:
         self.lock = HardwareLock(directories.state, f"reachd ({site.source})")
         self.server = ControlServer(directories.runtime / SOCKET_FILE, self.dispatch)
         self.alarms: dict[str, str] = {}
+        states = list(TRANSITIONS)
+        self.monitor = Monitor(
+            site, clock, directories.state, directories.runs,
+            daemon_state=lambda: states.index(self.machine.state),
+        )
         self.paused = False
         self.current: Job | None = None
         self.session: RunSession | None = None
@@ -161,6 +170,7 @@ class Daemon:
         for trigger in self.timers.start(self.clock.now()):
             self._queue_timer(trigger)
         self._check_timers()
+        self.monitor.start()
         self.server.start()
         if self.machine.state == "starting":
             self.machine.go("idle", "started: front-end safe, socket open")
@@ -189,6 +199,7 @@ class Daemon:
     def close(self) -> None:
         """Close the socket, release the hardware, say goodbye to systemd."""
         self.server.close()
+        self.monitor.close()
         self.lock.release()
         if self.machine.can("stopped"):
             self.machine.go("stopped", self._halt_reason or "closed")
@@ -268,10 +279,11 @@ class Daemon:
         self.progress = HubProgress(
             self.hub, job.id, on_step=self._step_started, on_started=started
         )
+        self.monitor.hand_over()
         session = RunSession(
             schedule, self.site, self.clock, self.dirs.runs, progress=self.progress,
             metadata={"job": job.id, "origin": job.origin, "resumes": job.resumes},
-            carry_from=Path(job.resumes[-1]) if job.resumes else None,
+            carry_from=Path(job.resumes[-1]) if job.resumes else None, monitor=self.monitor,
         )
         self.current, self.session = job, session
         self.queue.update(job, state="running", started=time.time())
@@ -305,6 +317,7 @@ class Daemon:
         self._finished = None
         run = str(self.session.directory) if self.session and self.session.directory else None
         self.current, self.session, self.progress, self._worker = None, None, None, None
+        self.monitor.run_ended()
         state = "completed" if failure is None else failure.status
         if state == "interrupted" and job.state == "cancelled":
             state = "cancelled"
@@ -359,7 +372,8 @@ class Daemon:
     # ----------------------------------------------------------------- the front-end
     def _go_safe(self) -> None:
         """Put the front-end in its safe state through the Teensy alone, and let it go."""
-        state = Instruments.from_site(self.site, self.clock).make_safe()
+        with self.monitor.hardware():
+            state = Instruments.from_site(self.site, self.clock).make_safe()
         log.info("front-end safe: %s", " ".join(f"{k}={v}" for k, v in state.as_pins().items()))
 
     def _link_failed(self, reason: str, job: Job | None = None) -> None:
@@ -453,6 +467,7 @@ class Daemon:
             alarms=list(self.alarms.values()),
             timers=self.timers.next_occurrences(self.clock.now()),
             status=self.status_line(),
+            health=self.monitor.status(),
         )
 
     def _cancel(self, job_id: int, peer: Peer) -> Job:

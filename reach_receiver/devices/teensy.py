@@ -113,6 +113,9 @@ class Teensy:
         self._keepalive: threading.Thread | None = None
         self._keepalive_stop = threading.Event()
         self.keepalive_failures = 0
+        #: The last state read back (``time.monotonic()`` of the read, the state), so that
+        #: a monitor can use the read a run made instead of asking the board again.
+        self.last_state: tuple[float, FrontEndState] | None = None
 
     # ----------------------------------------------------------------- life cycle
     def connect(self) -> None:
@@ -369,11 +372,15 @@ class Teensy:
 
     def read_state(self) -> FrontEndState:
         """Every output, read back from the board."""
-        return FrontEndState.parse(self.command("state"))
+        return self._remember(FrontEndState.parse(self.command("state")))
 
     def safe(self) -> FrontEndState:
         """Put the front-end in its safe state (PROTOCOL.md) and return the state."""
-        return FrontEndState.parse(self.command("safe"))
+        return self._remember(FrontEndState.parse(self.command("safe")))
+
+    def _remember(self, state: FrontEndState) -> FrontEndState:
+        self.last_state = (time.monotonic(), state)
+        return state
 
     def temperatures(self) -> dict[int, float]:
         """The MCP9808 sensors found on the I2C bus, address -> degrees C."""

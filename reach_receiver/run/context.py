@@ -39,6 +39,8 @@ from .instruments import Instruments
 from .measure import TemperatureLogger
 
 if TYPE_CHECKING:
+    from reach_receiver.monitor import RunWatch
+
     from .steps.calibrate import CalibrationOutcome
 
 log = logging.getLogger(__name__)
@@ -152,6 +154,8 @@ class RunContext:
     temperatures: TemperatureLogger | None = None
     checks: list[CheckRecord] = field(default_factory=list)
     calibration: CalibrationOutcome | None = None
+    #: The daemon's monitor, when there is one (:mod:`.monitoring`).
+    watch: RunWatch | None = None
     _stored_readings: int = 0
 
     # ----------------------------------------------------------------- time
@@ -165,9 +169,24 @@ class RunContext:
         return max(1, round(seconds / self.period_s))
 
     def wait(self, seconds: float) -> None:
-        """Wait ``seconds`` of clock time; a stop request ends the wait at once."""
-        if self.clock.wait(self.stop.event, max(seconds, 0.0)):
-            self.stop.check()
+        """Wait ``seconds`` of clock time; a stop request ends the wait at once.
+
+        A wait is idle time: with a monitor, it is a safe point every cadence.
+        """
+        end = self.clock.now() + max(seconds, 0.0)
+        while True:
+            self.safe_point()
+            left = end - self.clock.now()
+            if left <= 0:
+                return
+            step = left if self.watch is None else min(left, self.watch.cadence_s)
+            if self.clock.wait(self.stop.event, step):
+                self.stop.check()
+
+    def safe_point(self) -> None:
+        """Nothing is being measured: the monitor may read the board and the TEC now."""
+        if self.watch is not None:
+            self.watch.safe_point()
 
     def spectrum_progress(self, what: str, seconds_each: float) -> Callable[[int, int], None]:
         """A per-spectrum callback: reports ``what`` with the time left, honours a stop."""

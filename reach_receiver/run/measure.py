@@ -170,12 +170,14 @@ def take_dicke_cycle(
     temperatures: TemperatureLogger | None = None,
     discard: int = 1,
     progress: CycleProgress | None = None,
+    between: Callable[[], None] | None = None,
 ) -> DickeCycle:
     """Integrate ``source``, the reference load and the noise source, ``n_spectra`` each.
 
     With a running :class:`TemperatureLogger`, each position keeps the readings taken
     while its averaged spectra integrated (:func:`readings_during`).
-    ``progress`` is called after every spectrum; it may stop the cycle by raising. A
+    ``progress`` is called after every spectrum; it may stop the cycle by raising;
+    ``between`` after each position's integration (a safe point for the monitor). A
     position during which the front-end moved is integrated again
     (:func:`integrate_connected`; a repeat reports its spectra from 1 again).
 
@@ -213,6 +215,8 @@ def take_dicke_cycle(
                 temperatures, accumulated.timestamps, spectrometer.period or 0.0
             )
         log.info("%s: %s position, %d spectra", source, position, accumulated.n_spectra)
+        if between is not None:
+            between()
     return DickeCycle(source, spectra, seconds, readings, states, repeats)
 
 

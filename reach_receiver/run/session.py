@@ -29,6 +29,7 @@ from typing import Any
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.errors import ReceiverError
+from reach_receiver.monitor import Monitor
 from reach_receiver.schedule.compile import compile_schedule
 from reach_receiver.schedule.kinds import KindRegistry
 from reach_receiver.schedule.lst import apparent_lst_h
@@ -48,6 +49,7 @@ from .context import (
 )
 from .instruments import Instruments
 from .kind import RunnableKind
+from .monitoring import store_readings, watch
 from .resume import carry
 from .steps import STANDARD_KINDS
 from .steps.calibrate import CalibrationOutcome
@@ -134,6 +136,8 @@ class RunSession:
     #: Set once the run is putting the front-end safe and closing its file: nothing may
     #: interrupt that (a second Ctrl-C is then ignored by the command line).
     closing: bool = False
+    #: The daemon's monitor: reads at the run's safe points, its readings in the run file.
+    monitor: Monitor | None = None
 
     @classmethod
     def prepare(
@@ -210,6 +214,8 @@ class RunSession:
                 progress=self.progress,
             )
             context.run_steps = lambda steps, scope: self._run_steps(context, steps, scope)
+            if self.monitor is not None:
+                watch(self.monitor, context)
             return self._run(context, entries, total_s)
 
     def _run(
@@ -228,6 +234,7 @@ class RunSession:
                 self._execute(run, step, (index,))
             self.closing = True
             run.stop_temperatures()
+            _store_health(run)
             run_file: Path | None = run.store.finish("completed")
         except BaseException as err:
             self.closing = True
@@ -238,6 +245,8 @@ class RunSession:
             raise  # SystemExit and the like: the run is closed, let it go on
         finally:
             run.stop_temperatures()
+            if run.watch is not None:
+                run.watch.close()
             run.instruments.close()
         return RunSummary(
             self.directory or run.store.directory,
@@ -258,6 +267,7 @@ class RunSession:
         kind = self.kinds.of(step)
         if not isinstance(kind, RunnableKind):  # checked before the run started
             raise TypeError(f"step kind {kind.name} has no executor")
+        run.safe_point()
         record_step(run, path, step, "started")
         run.path = path
         kind.execute(step, run)
@@ -299,6 +309,7 @@ def _fail_safe(run: RunContext, status: str, reason: str, err: BaseException) ->
         run.stop_temperatures()
     except (ReceiverError, OSError) as temp_err:
         log.error("could not store the last temperatures: %s", temp_err)
+    _store_health(run)
     try:
         message = f"{reason}; {safe_note}"
         if pins:
@@ -308,6 +319,19 @@ def _fail_safe(run: RunContext, status: str, reason: str, err: BaseException) ->
     except (ReceiverError, OSError) as store_err:
         log.critical("could not close the run file: %s", store_err)
         return None
+
+
+def _store_health(run: RunContext) -> None:
+    """The monitor's readings taken during the run, into the run file (if any)."""
+    if run.watch is None:
+        return
+    taken, run.watch.taken = run.watch.taken, []
+    try:
+        count = store_readings(run.store, taken)
+    except (ReceiverError, OSError, ValueError) as err:
+        log.error("could not store the health readings: %s", err)
+    else:
+        log.info("%d health readings of the monitor stored with the run", count)
 
 
 @contextlib.contextmanager

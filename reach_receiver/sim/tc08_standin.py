@@ -11,6 +11,7 @@ then loads it unchanged, so the same code path as on site is exercised.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import subprocess
@@ -67,14 +68,25 @@ class Tc08StandIn:
         self._update_s = update_s
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._open: set[int] = set()
         self.write()
 
     def write(self) -> None:
         """Rewrite the values file atomically with the temperatures now."""
-        values = self._temperatures_c(self._clock.now())
+        values = list(self._temperatures_c(self._clock.now()))
+        for channel in self._open:
+            values[channel] = math.nan
         tmp = self.values.with_name(self.values.name + ".tmp")
         tmp.write_text(" ".join(f"{v:.4f}" for v in values) + "\n")
         os.replace(tmp, self.values)
+
+    def open_circuit(self, channel: int, is_open: bool = True) -> None:
+        """A broken thermocouple: ``channel`` reads NaN (the driver flags it) until closed."""
+        if is_open:
+            self._open.add(channel)
+        else:
+            self._open.discard(channel)
+        self.write()
 
     def start(self) -> None:
         """Keep the file current from a background thread."""

@@ -14,6 +14,8 @@ Contents of the measurement kinds (each becomes ``/measurements/NNNNNN_<kind>_<n
                  switch_state (JSON), counters (JSON); temperature (K, when known)
     spectrum     spectrum, timestamps; attrs integration_s, switch_state (JSON)
     temperatures timestamps (s), values (n_times, n_channels; degC); attr channels
+    monitoring   timestamps (s), series, values, status (one row per health reading);
+                 attrs keys, units (per series), status_names
     check        attrs passed, details (JSON); one dataset per array (units from its name)
     solution     solution/ (the engine's solution layout); attr verification (JSON)
     calibrated   frequencies (Hz), mean (K), std (K), flags (1)
@@ -400,6 +402,34 @@ class RunStore:
             f.attrs["channels"] = [str(c) for c in channels]
 
         self._add("temperatures", "log", float(times[-1]), fill)
+
+    def add_monitoring(
+        self,
+        timestamps: Sequence[float],
+        series: Sequence[int],
+        values: Sequence[float],
+        statuses: Sequence[int],
+        *,
+        keys: Sequence[str],
+        units: Sequence[str],
+        status_names: Sequence[str],
+    ) -> None:
+        """Store the health readings taken during the run, one row per reading.
+
+        ``series[i]`` indexes ``keys``/``units``, ``statuses[i]`` indexes ``status_names``.
+        """
+        times = np.asarray(timestamps, dtype=float)
+        if times.ndim != 1 or times.size == 0 or not len(series) == len(values) == times.size:
+            raise ValueError("monitoring readings need as many series, values and times")
+
+        def fill(f: Any) -> None:
+            dataset(f, "timestamps", times, UNITS_S)
+            dataset(f, "series", np.asarray(series, dtype=np.int32), UNITS_NONE)
+            dataset(f, "values", np.asarray(values, dtype=float), UNITS_NONE)
+            dataset(f, "status", np.asarray(statuses, dtype=np.int8), UNITS_NONE)
+            f.attrs.update(keys=list(keys), units=list(units), status_names=list(status_names))
+
+        self._add("monitoring", "health", float(times[-1]), fill)
 
     def add_check(
         self,

@@ -62,7 +62,8 @@ def dicke_cycle(run: RunContext, source: str, seconds: float, label: str = "") -
         run.progress.update(f"Dicke {source}{where}: {position}", done, total, left)
 
     cycle = take_dicke_cycle(
-        devices.frontend, devices.spectrometer, source, n, run.temperatures, progress=progress
+        devices.frontend, devices.spectrometer, source, n, run.temperatures, progress=progress,
+        between=run.safe_point,
     )
     temperature, temperature_std = source_temperature(cycle, run.site.thermocouples.get(source))
     connects = {"source": source, **DICKE_REFERENCES}
