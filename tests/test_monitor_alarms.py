@@ -1,0 +1,181 @@
+"""Injected faults raise the right alarm within two cadences and clear when they end.
+
+The daemon runs idle against the simulated receiver (real transports: the firmware's
+host build on a pty behind a udev-style symlink, the TEC behind the Teensy's UART, the
+TC-08 stand-in library) at 60x, so a one-minute cadence is one real second. Each fault
+is injected in the simulator (or the file system), never in our code: a TEC that stops
+answering, a TEC that reports a fault, a thermocouple gone open circuit, the front-end
+unplugged, the data disk below its threshold. The Prometheus endpoint of the same
+daemon is parsed with prometheus_client's own parser.
+"""
+
+import dataclasses
+import logging
+import os
+import shutil
+import sys
+import threading
+import urllib.request
+
+import pytest
+from prometheus_client.parser import text_string_to_metric_families
+
+from reach_receiver.config.daemon import DaemonSettings
+from reach_receiver.config.monitoring import DEFAULT_ALARMS, MonitoringSettings
+from reach_receiver.config.site import replace_devices
+from reach_receiver.daemon.service import Daemon, Directories
+from reach_receiver.devices.teensy import Teensy
+from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
+from tests.test_daemon_link import plug, until
+
+COMPRESSION = 60.0
+CADENCE_S = 60.0
+#: Free space the fault takes from the data directory's file system.
+FILL_BYTES = 3 * 10**9
+
+
+@pytest.fixture(scope="module")
+def idle_daemon(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("alarms")
+    settings = SimulationSettings(compression=COMPRESSION, spectrum_period_s=30.0)
+    with SimulatedReceiver(settings) as sim:
+        with Teensy(sim.teensy.port) as board:  # the TEC powered, as on site
+            board.set_rail("24v", True)
+            board.set_rail("tec", True)
+        link = tmp / "reach-teensy"
+        plug(link, sim.teensy.port)
+        directories = Directories(tmp / "run", tmp / "state")
+        directories.create()
+        free = shutil.disk_usage(directories.runs).free
+        if free < 2 * FILL_BYTES:
+            pytest.skip(f"needs {2 * FILL_BYTES / 1e9:g} GB free in {tmp}")
+        disk = dataclasses.replace(
+            next(a for a in DEFAULT_ALARMS if a.name == "low disk"),
+            below=free - FILL_BYTES / 2, hysteresis=FILL_BYTES / 6,
+        )
+        hooked = tmp / "hook.log"
+        script = f"import sys; open({str(hooked)!r}, 'a').write(' '.join(sys.argv[1:3]) + '\\n')"
+        monitoring = MonitoringSettings(
+            cadence_s=CADENCE_S, prometheus_port=0, hook=(sys.executable, "-c", script),
+            alarms=tuple(disk if a.name == "low disk" else a for a in DEFAULT_ALARMS),
+        )
+        site = replace_devices(sim.site(), teensy={"port": str(link)})
+        site = dataclasses.replace(
+            site, monitoring=monitoring,
+            daemon=DaemonSettings(runtime_dir=directories.runtime, state_dir=directories.state),
+        )
+        reachd = Daemon(site, sim.clock, directories, tick_s=0.05)
+        reachd.start()
+        serving = threading.Thread(target=reachd.serve)
+        serving.start()
+        until(lambda: reachd.monitor.samples >= 2, timeout_s=30)
+        yield reachd, sim, link, hooked
+        reachd.halt("test over")
+        serving.join(timeout=60)
+        reachd.close()
+
+
+def _raise_and_clear(reachd, start, stop, alarm_id):
+    """Inject, wait for the alarm, end the fault, wait for it to clear; both delays (s)."""
+    board = reachd.monitor.board
+    assert alarm_id not in board.active, board.active
+    injected = reachd.clock.now()
+    start()
+    alarm = until(lambda: board.active.get(alarm_id), timeout_s=30)
+    raised_after = alarm.raised_at - injected
+    ended = reachd.clock.now()
+    stop()
+    until(lambda: alarm_id not in board.active, timeout_s=30)
+    cleared = next(t for what, a, t in reversed(board.history) if a.id == alarm_id)
+    return raised_after, cleared - ended
+
+
+def _fill(path):
+    fd = os.open(path, os.O_CREAT | os.O_WRONLY, 0o600)
+    try:
+        os.posix_fallocate(fd, 0, FILL_BYTES)
+    finally:
+        os.close(fd)
+
+
+FAULTS = {
+    "tec stops": (
+        lambda sim, link, tmp: sim.tec.drop_next_replies(10**9),
+        lambda sim, link, tmp: sim.tec.drop_next_replies(0),
+        "device silent: reach_device_up{device=tec}",
+    ),
+    "tec fault": (
+        lambda sim, link, tmp: sim.tec.set_fault_bits(8),
+        lambda sim, link, tmp: sim.tec.set_fault_bits(0),
+        "tec fault: reach_tec_fault_bits",
+    ),
+    "thermocouple open": (
+        lambda sim, link, tmp: sim.tc08.open_circuit(3),
+        lambda sim, link, tmp: sim.tc08.open_circuit(3, False),
+        "thermocouple: reach_tc08_fault{channel=3,component=MS3 switch}",
+    ),
+    "disk low": (
+        lambda sim, link, tmp: _fill(tmp / "filler"),
+        lambda sim, link, tmp: (tmp / "filler").unlink(),
+        "low disk: reach_disk_free_bytes",
+    ),
+}
+
+
+def test_prometheus_endpoint_parses_and_binds_only_to_loopback(idle_daemon):
+    reachd = idle_daemon[0]
+    host, port = reachd.monitor.exporter.address
+    assert host == "127.0.0.1"
+    text = urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=5).read().decode()
+    families = {f.name: f for f in text_string_to_metric_families(text)}
+    for name in ("reach_tc08_temperature_celsius", "reach_teensy_temperature_celsius",
+                 "reach_tec_temperature_celsius", "reach_rail_on", "reach_device_up",
+                 "reach_disk_free_bytes", "reach_daemon_state"):
+        assert name in families, sorted(families)
+        assert families[name].type == "gauge"
+    channels = {s.labels["channel"] for s in families["reach_tc08_temperature_celsius"].samples}
+    assert channels == {str(c) for c in range(9)}
+    (state,) = families["reach_daemon_state"].samples
+    assert state.value == 1.0  # idle
+
+
+@pytest.mark.parametrize("fault", list(FAULTS))
+def test_an_injected_fault_raises_its_alarm_within_two_cadences_and_clears(
+    idle_daemon, fault, caplog
+):
+    reachd, sim, link, hooked = idle_daemon
+    start, stop, alarm_id = FAULTS[fault]
+    runs = reachd.dirs.runs
+    with caplog.at_level(logging.INFO, logger="reach_receiver.monitor"):
+        raised, cleared = _raise_and_clear(
+            reachd, lambda: start(sim, link, runs), lambda: stop(sim, link, runs), alarm_id
+        )
+    assert 0 <= raised <= 2 * CADENCE_S, raised
+    assert 0 <= cleared <= 2 * CADENCE_S, cleared
+    text = caplog.text
+    assert f"alarm raised: {alarm_id.split(': ')[0]}" in text
+    assert f"alarm cleared: {alarm_id}" in text
+    name = alarm_id.split(":")[0]
+    until(lambda: hooked.exists() and f"cleared {name}" in hooked.read_text(), timeout_s=10)
+    assert f"raised {name}" in hooked.read_text()
+
+
+def test_an_unplugged_front_end_raises_the_silent_device_alarm_and_clears(idle_daemon):
+    reachd, sim, link, _ = idle_daemon
+
+    def unplug():
+        sim.teensy.close()
+
+    def replug():
+        sim.teensy.start()
+        plug(link, sim.teensy.port)
+
+    alarm_id = "device silent: reach_device_up{device=teensy}"
+    raised, cleared = _raise_and_clear(reachd, unplug, replug, alarm_id)
+    assert 0 <= raised <= 2 * CADENCE_S, raised
+    assert 0 <= cleared <= 2 * CADENCE_S, cleared
+    status = reachd._status_reply()["health"]
+    link_state = reachd.monitor.links.of("teensy")
+    assert link_state.reconnects >= 1
+    assert link_state.errors >= 1
+    assert not [a for a in status["alarms"] if "teensy" in a]
