@@ -11,6 +11,7 @@
     reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,...  (calibration.cli_import)
     reach-cal import vna DIR -o OUT_DIR --devices a,b,...
     reach-cal validate RUN.h5 --leave-one-out [...]  (calibration.cli_validate)
+    reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf]  (calibration.cli_report)
 
 Files are those of :mod:`calibration.hdf5_io`. Errors an operator can act on (unreadable or
 malformed files, unusable data, an unsolvable model) print ``reach-cal: error: <message>``
@@ -40,6 +41,7 @@ from .cli_args import (
     solver_from_args,
 )
 from .cli_import import add_import_command
+from .cli_report import add_report_command
 from .cli_validate import add_validate_command
 from .data import CalibrationData, SourceData
 from .errors import CalibrationError, InvalidDataError
@@ -341,6 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     summary.add_argument("--top", type=int, default=5, help="evidence-table rows to show")
     add_import_command(sub)
     add_validate_command(sub)
+    add_report_command(sub)
     return parser
 
 

@@ -1,0 +1,183 @@
+"""Figures of a solution alone: the noise-wave parameters with their bands, the evidence.
+
+* :func:`noise_wave_parameters` (thesis figs. 4.7, 4.20): each parameter's posterior mean
+  against frequency, and beside it its departure from that mean with the 68 % and 95 %
+  credible bands (the bands are a few mK to K on parameters of hundreds of K, invisible on
+  the left). A model-averaged posterior (:class:`~calibration.averaging.MixturePosterior`)
+  gives its bands as quantiles of draws from the mixture; a single model (or a solution
+  read from a file, which keeps the mixture's moments) as Student-t quantiles of
+  :meth:`~calibration.solution.Solution.parameter_std`.
+* :func:`evidence_landscape` (thesis fig. 4.5): the evidence profile over each
+  parameter's order, and the leading models with their weights.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+from scipy import stats
+
+from ..averaging import MixturePosterior
+from ..noise_waves import PARAMETERS
+from ..polynomial_model import PolynomialParameters
+from ..solution import Solution
+from .style import (
+    BAND_ALPHA,
+    PARAMETER_COLOURS,
+    PARAMETER_LABELS,
+    mhz,
+    new_figure,
+    note,
+    styled,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Credible levels of the bands.
+LEVELS = (0.68, 0.95)
+#: Draws from a mixture posterior for its quantiles.
+MIXTURE_DRAWS = 4000
+#: Models listed in the evidence figure.
+TOP_MODELS = 12
+#: Delta log Z is linear within this many nats of the best, logarithmic beyond.
+LINEAR_NATS = 10.0
+
+
+def parameter_bands(
+    solution: Solution, freq_hz: FloatArray, seed: int = 0
+) -> tuple[FloatArray, dict[float, tuple[FloatArray, FloatArray]]]:
+    """Posterior mean ``(5, n)`` and, per level, the band's (low, high) about that mean."""
+    mean = solution.evaluate(freq_hz)
+    bands: dict[float, tuple[FloatArray, FloatArray]] = {}
+    if isinstance(solution.posterior, MixturePosterior):
+        draws = solution.sample_parameters(freq_hz, MIXTURE_DRAWS, np.random.default_rng(seed))
+        for level in LEVELS:
+            lo, hi = np.quantile(draws - mean, [0.5 - level / 2, 0.5 + level / 2], axis=0)
+            bands[level] = (lo, hi)
+        return mean, bands
+    std = solution.parameter_std(freq_hz)
+    dof = solution.posterior.dof
+    for level in LEVELS:
+        q = 0.5 + level / 2
+        z = float(stats.norm.ppf(q) if np.isinf(dof) else stats.t.ppf(q, dof))
+        bands[level] = (-z * std, z * std)
+    return mean, bands
+
+
+@styled
+def noise_wave_parameters(
+    solution: Solution,
+    freq_hz: FloatArray | None = None,
+    truth: PolynomialParameters | None = None,
+    n_channels: int = 400,
+) -> Figure:
+    """The five noise-wave parameters (K) against frequency, with 68/95 % bands.
+
+    ``freq_hz`` defaults to ``n_channels`` points over the solution's band; ``truth`` (a
+    simulated receiver's parameters) is drawn on both columns when given.
+    """
+    basis = solution.basis
+    freq = (
+        np.linspace(basis.f_lo_hz, basis.f_hi_hz, n_channels)
+        if freq_hz is None
+        else np.asarray(freq_hz, dtype=float)
+    )
+    mean, bands = parameter_bands(solution, freq)
+    true = None if truth is None else truth.evaluate(freq)
+    fig = new_figure(8.6)
+    axes = fig.subplots(len(PARAMETERS), 2, sharex=True, squeeze=False)
+    x = mhz(freq)
+    for k, name in enumerate(PARAMETERS):
+        colour, label = PARAMETER_COLOURS[name], PARAMETER_LABELS[name]
+        left, right = axes[k]
+        left.plot(x, mean[k], color=colour, label="posterior mean")
+        left.set_ylabel(f"{label} (K)")
+        for level, alpha in zip(LEVELS, BAND_ALPHA, strict=True):
+            lo, hi = bands[level]
+            right.fill_between(
+                x, lo[k], hi[k], color=colour, alpha=alpha, lw=0, label=f"{level:.0%} band"
+            )
+        right.axhline(0.0, color=colour, lw=0.8)
+        right.set_ylabel(f"{label} − mean (K)")
+        if true is not None:
+            left.plot(x, true[k], color="k", ls="--", lw=0.9, label="truth")
+            right.plot(x, true[k] - mean[k], color="k", ls="--", lw=0.9, label="truth − mean")
+    axes[0, 0].set_title("posterior mean")
+    axes[0, 1].set_title("departure from the mean: 68 % and 95 % credible bands")
+    for ax in axes[-1]:
+        ax.set_xlabel("frequency (MHz)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    more, more_labels = axes[0, 1].get_legend_handles_labels()
+    fig.legend(handles + more, labels + more_labels, loc="outside lower center", ncols=5)
+    orders = ", ".join(map(str, solution.best_orders))
+    fig.suptitle(
+        f"Noise-wave parameters ({solution.method} solver, orders {orders})", fontweight="bold"
+    )
+    return fig
+
+
+def evidence_profile(solution: Solution) -> dict[str, dict[int, float]]:
+    """Per parameter, the best log Z over models with each number of terms, minus the best."""
+    table = solution.evidence_table
+    if not table:
+        return {}
+    best = max(table.values())
+    profile: dict[str, dict[int, float]] = {name: {} for name in PARAMETERS}
+    for orders, logz in table.items():
+        for name, n in zip(PARAMETERS, orders, strict=True):
+            row = profile[name]
+            row[n] = max(row.get(n, -np.inf), logz - best)
+    return profile
+
+
+@styled
+def evidence_landscape(solution: Solution) -> Figure:
+    """The evidence over model orders: a profile per parameter and the leading models."""
+    fig = new_figure(4.8)
+    prof_ax, top_ax = fig.subplots(1, 2, width_ratios=(1.1, 1))
+    table = solution.evidence_table
+    if not table:
+        note(prof_ax, "this solution has no evidence table\n(its orders were fixed)")
+        top_ax.remove()
+        return fig
+    best_orders = solution.best_orders
+    for k, (name, row) in enumerate(evidence_profile(solution).items()):
+        ns = sorted(row)
+        values = [row[n] for n in ns]
+        offset = (k - 2) * 0.06
+        prof_ax.plot(
+            np.add(ns, offset), values, "o-", color=PARAMETER_COLOURS[name], ms=4,
+            label=PARAMETER_LABELS[name],
+        )
+        prof_ax.plot(best_orders[k] + offset, 0.0, "*", color=PARAMETER_COLOURS[name], ms=12)
+    prof_ax.set_xlabel("number of polynomial terms of the parameter")
+    prof_ax.set_ylabel(r"best $\Delta\log Z$ over the other orders (nats)")
+    prof_ax.text(0.01, 0.01, f"linear within {LINEAR_NATS:g} nats, logarithmic below",
+                 transform=prof_ax.transAxes, fontsize=8, color="0.4")
+    prof_ax.set_title(f"evidence profile ({len(table)} models; ★ best)")
+    prof_ax.set_yscale("symlog", linthresh=LINEAR_NATS)
+    prof_ax.set_ylim(top=3)
+    prof_ax.legend(loc="center right", ncols=1)
+
+    weights = {
+        tuple(w["orders"]): float(w["weight"])
+        for w in solution.metadata.get("model_weights") or []
+    }
+    ranked = sorted(table.items(), key=lambda item: -item[1])[:TOP_MODELS]
+    top = ranked[0][1]
+    labels = [",".join(map(str, o)) for o, _ in ranked]
+    deltas = [z - top for _, z in ranked]
+    y = np.arange(len(ranked))
+    top_ax.barh(y, deltas, color="C0", alpha=0.7)
+    top_ax.set_yticks(y, labels, fontfamily="monospace")
+    top_ax.invert_yaxis()
+    top_ax.set_xlabel(r"$\Delta\log Z$ from the best (nats)")
+    top_ax.set_title("leading models (orders unc,cos,sin,NS,L): weight")
+    span = min(deltas) if min(deltas) < 0 else -1.0
+    for yi, (orders, _) in zip(y, ranked, strict=True):
+        weight = weights.get(tuple(orders))
+        text = f"{weight:.3f}" if weight is not None else "—"
+        top_ax.text(span * 1.02, yi, text, va="center", ha="right", fontsize=9)
+    top_ax.set_xlim(span * 1.25, 0.05 * abs(span))
+    return fig

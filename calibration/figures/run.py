@@ -1,0 +1,140 @@
+"""Figures of a run's raw material: Dicke powers, flagged channels, thermocouple readings.
+
+* :func:`dicke_powers`: each source's three Dicke spectra (source, load, noise source;
+  the spectrometer's arbitrary power unit) and the ``Q`` they give (eq. 3.9);
+* :func:`flagged_channels`: which channels are flagged, per spectrum (a run without
+  flags says so);
+* :func:`temperatures`: every thermocouple channel against time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from ..data import CalibrationData, SourceData
+from ..run_records import TemperatureLog
+from .style import axes_grid, legend_outside, mhz, new_figure, note, source_styles, styled
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Flags = BoolArray | Mapping[str, BoolArray | tuple[FloatArray, BoolArray]]
+
+Q_DEFINITION = (
+    r"$Q = (P_\mathrm{source} - P_\mathrm{load})\,/\,(P_\mathrm{NS} - P_\mathrm{load})$"
+)
+_POSITIONS = (
+    ("p_source", r"$P_\mathrm{source}$", "switch on the source"),
+    ("p_load", r"$P_\mathrm{load}$", "switch on the reference load"),
+    ("p_ns", r"$P_\mathrm{NS}$", "switch on the noise source"),
+)
+
+
+def _spread(sources: Mapping[str, SourceData], attr: str) -> float:
+    """Largest relative difference between the sources' spectra of one Dicke position."""
+    stack = np.stack([getattr(src, attr) for src in sources.values()])
+    return float(np.max((stack.max(axis=0) - stack.min(axis=0)) / np.abs(stack.mean(axis=0))))
+
+
+@styled
+def dicke_powers(
+    data: CalibrationData, others: Mapping[str, SourceData] | None = None
+) -> Figure:
+    """The three Dicke spectra of every source and their ``Q``, against frequency."""
+    sources = {**data.sources, **dict(others or {})}
+    styles = source_styles(sources)
+    fig = new_figure(7.0)
+    axes, bottom = axes_grid(fig, 4, 2)
+    x = mhz(data.freq_hz)
+    for name, src in sources.items():
+        for ax, (attr, _, _) in zip(axes, _POSITIONS, strict=False):
+            ax.plot(x, getattr(src, attr), lw=0.8, label=name, **styles[name])
+        axes[3].plot(x, src.q, lw=0.8, label=name, **styles[name])
+    for ax, (attr, label, title) in zip(axes, _POSITIONS, strict=False):
+        ax.set_ylabel(f"{label} (arbitrary power)")
+        ax.set_title(f"{label}: {title}")
+        if attr != "p_source":
+            ax.set_title(f"{label}: {title}; sources differ by {_spread(sources, attr):.2%}")
+    axes[3].set_ylabel("Q (eq. 3.9)")
+    axes[3].set_title(Q_DEFINITION)
+    for ax in bottom:
+        ax.set_xlabel("frequency (MHz)")
+    legend_outside(fig, axes)
+    fig.suptitle("Dicke powers of the run", fontweight="bold")
+    return fig
+
+
+def _rows(freq_hz: FloatArray, flags: Flags) -> dict[str, tuple[FloatArray, BoolArray]]:
+    if not isinstance(flags, Mapping):
+        flags = {"run": flags}
+    out: dict[str, tuple[FloatArray, BoolArray]] = {}
+    for name, value in flags.items():
+        freq, mask = value if isinstance(value, tuple) else (freq_hz, value)
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != np.shape(freq):
+            raise ValueError(f"flags of {name!r}: {mask.shape} for {np.shape(freq)} channels")
+        out[name] = (np.asarray(freq, dtype=float), mask)
+    return out
+
+
+@styled
+def flagged_channels(freq_hz: FloatArray, flags: Flags | None = None) -> Figure:
+    """Flagged channels (``True`` = flagged) per spectrum, against frequency.
+
+    ``flags`` is one mask over ``freq_hz``, or masks by name, each over ``freq_hz`` or
+    with its own frequencies ``(freq_hz, mask)``; ``None`` (a run without flags) gives a
+    figure that says so.
+    """
+    rows = _rows(np.asarray(freq_hz, dtype=float), flags) if flags is not None else {}
+    fig = new_figure(1.6 + 0.35 * max(len(rows), 2))
+    ax = fig.add_subplot()
+    if not rows:
+        note(ax, "this run has no channel flags\n(no RFI flagging was stored with it)")
+        return fig
+    labels = []
+    for i, (name, (freq, mask)) in enumerate(rows.items()):
+        x = mhz(freq)
+        width = float(np.median(np.diff(x))) if x.size > 1 else 0.01
+        flagged = x[mask]
+        ax.broken_barh([(f - width / 2, width) for f in flagged], (i - 0.4, 0.8), color="C3")
+        labels.append(f"{name}: {np.count_nonzero(mask)} ({np.mean(mask):.2%})")
+    ax.set_yticks(range(len(rows)), labels)
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    band = mhz(np.asarray(freq_hz, dtype=float))
+    ax.set_xlim(float(band[0]), float(band[-1]))
+    ax.set_xlabel("frequency (MHz)")
+    ax.grid(axis="y", visible=False)
+    total = sum(int(np.count_nonzero(m)) for _, m in rows.values())
+    if total == 0:
+        ax.text(0.5, 0.5, "no channel flagged", transform=ax.transAxes, ha="center",
+                va="center", fontsize=12, color="C2")
+    ax.set_title(f"Flagged channels (red): {total} in {len(rows)} spectra")
+    return fig
+
+
+@styled
+def temperatures(log: TemperatureLog | None, columns: int = 3) -> Figure:
+    """Every thermocouple channel (degC) against the hours since the first reading."""
+    if log is None or log.timestamps_s.size == 0:
+        fig = new_figure(2.0)
+        note(fig.add_subplot(), "this run has no thermocouple log")
+        return fig
+    n = len(log.channels)
+    rows = -(-n // columns)
+    fig = new_figure(1.0 + 1.8 * rows)
+    axes, bottom = axes_grid(fig, n, columns)
+    hours = (log.timestamps_s - log.timestamps_s[0]) / 3600.0
+    for k, (ax, channel) in enumerate(zip(axes, log.channels, strict=True)):
+        values = log.values_c[:, k]
+        ax.plot(hours, values, color=f"C{k % 10}", lw=0.8)
+        spread = np.ptp(values) if values.size else 0.0
+        ax.set_title(f"{channel}: {np.mean(values):.2f} °C, p-p {spread:.2f} °C", fontsize=9.5)
+        if k % columns == 0:
+            ax.set_ylabel("°C")
+    for ax in bottom:
+        ax.set_xlabel("time since the first reading (h)")
+    fig.suptitle(f"Thermocouples over the run ({hours[-1]:.1f} h)", fontweight="bold")
+    return fig
