@@ -80,6 +80,10 @@ class SourceData:
         Standard uncertainty of the temperature, common to all channels (K): a
         thermometer's error is one offset for the whole spectrum. The radiometric solver
         marginalises it (:func:`calibration.normal_equations.build_normal_equations`).
+    gamma_std
+        Complex rms random error of ``gamma`` per channel (or a scalar), independent
+        between channels (the VNA's trace noise); ``None`` when not known. Carried into
+        temperatures by :mod:`calibration.reflection_noise`.
     """
 
     name: str
@@ -91,6 +95,7 @@ class SourceData:
     temperature_k: FloatArray | None = None
     q_variance_override: FloatArray | None = None
     temperature_std_k: float = 0.0
+    gamma_std: FloatArray | float | None = None
 
     def checked(self, n_channels: int) -> SourceData:
         """Return a copy with arrays coerced to ``n_channels`` and every value checked."""
@@ -132,9 +137,15 @@ class SourceData:
             override = _channel_array(self.q_variance_override, n_channels, "Q variance", name)
             if np.any(override <= 0):
                 raise InvalidDataError("Q variance must be > 0", name)
+        gamma_std = None
+        if self.gamma_std is not None:
+            gamma_std = _channel_array(self.gamma_std, n_channels, "reflection error", name)
+            if np.any(gamma_std < 0):
+                raise InvalidDataError("reflection error must be >= 0", name)
         return replace(
             self,
             gamma=gamma,
+            gamma_std=gamma_std,
             p_source=spectra[0],
             p_load=spectra[1],
             p_ns=spectra[2],
@@ -175,6 +186,9 @@ class SourceData:
             p_ns=self.p_ns[mask],
             temperature_k=pick(self.temperature_k),
             q_variance_override=pick(self.q_variance_override),
+            gamma_std=None if self.gamma_std is None else np.broadcast_to(
+                self.gamma_std, self.gamma.shape
+            )[mask],
         )
 
 
@@ -238,6 +252,13 @@ class CalibrationData:
         q = np.stack([s.q for s in self.sources.values()])
         var = np.stack([s.q_variance(self.channel_width_hz) for s in self.sources.values()])
         return temps, q, var
+
+    def reflection_errors(self) -> FloatArray | None:
+        """``(n_sources, n_channels)`` rms reflection errors, ``None`` if none is known."""
+        stds = [s.gamma_std for s in self.sources.values()]
+        if all(v is None for v in stds):
+            return None
+        return np.stack([np.zeros(self.n_channels) if v is None else v for v in stds])
 
     def temperature_variances(self) -> FloatArray:
         """Variance of each calibrator's temperature offset (K^2), in source order."""

@@ -17,6 +17,7 @@ layout of REACH's own tools::
     /observation_data/{src}_ns_spectra         P_NS,     (n,) or (n_spectra, n)
     /observation_data/{src}_s11                (n,) complex: source reflection
     /observation_data/{src}_q_variance         (n,) optional override of var(Q)
+    /observation_data/{src}_s11_std            (n,) optional rms random error of {src}_s11
     /observation_metadata/temperatures/{src}   (n,) or scalar, K: calibrators only;
                                                attribute std_k: its uncertainty (K)
     /simulation_truth/{orders, coefficients, gain_coefficients, offset_coefficients_k}
@@ -248,6 +249,9 @@ def write_run(
             _dataset(obs, f"{name}_s11", src.gamma, GAMMA_UNITS)
             if src.q_variance_override is not None:
                 _dataset(obs, f"{name}_q_variance", src.q_variance_override, "1")
+            if src.gamma_std is not None:
+                std = np.broadcast_to(src.gamma_std, src.gamma.shape)
+                _dataset(obs, f"{name}_s11_std", std, "1")
             if src.temperature_k is not None:
                 t = _dataset(temps, name, src.temperature_k, "K")
                 t.attrs["std_k"] = float(src.temperature_std_k)
@@ -284,13 +288,15 @@ def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> 
     std_k = float(temps[name].attrs.get("std_k", 0.0)) if name in temps else 0.0
     q_var = f"{name}_q_variance"
     override = _array(obs, q_var, path).astype(float) if q_var in obs else None
+    s11_std = f"{name}_s11_std"
+    gamma_std = _array(obs, s11_std, path).astype(float) if s11_std in obs else None
     try:
         integration = Integration(*seconds)
     except InvalidDataError as err:
         raise InvalidDataError(str(err), name) from err
     p_src, p_load, p_ns = powers
     return SourceData(
-        name, gamma, p_src, p_load, p_ns, integration, temperature, override, std_k
+        name, gamma, p_src, p_load, p_ns, integration, temperature, override, std_k, gamma_std
     )
 
 

@@ -60,6 +60,7 @@ from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
+from .reflection_noise import temperature_variance
 from .shrinkage import ShrinkagePrior
 from .solution import Solution
 
@@ -90,9 +91,18 @@ class LinearisedProblem:
 
 
 def linearise(
-    terms: DesignTerms, temps: FloatArray, q: FloatArray, var_q: FloatArray, theta0: FloatArray
+    terms: DesignTerms,
+    temps: FloatArray,
+    q: FloatArray,
+    var_q: FloatArray,
+    theta0: FloatArray,
+    extra_variance_k2: FloatArray | float = 0.0,
 ) -> LinearisedProblem:
-    """Gauss-Newton rows about ``theta0`` (``(5, n_channels)`` parameter curves)."""
+    """Gauss-Newton rows about ``theta0`` (``(5, n_channels)`` parameter curves).
+
+    ``extra_variance_k2`` is added to each row's variance in kelvin (the reflection's
+    error, :mod:`calibration.reflection_noise`).
+    """
     t_ns0 = theta0[INDEX["NS"]]
     if np.any(t_ns0 <= 0):
         raise IllPosedError(
@@ -103,7 +113,7 @@ def linearise(
     gain = terms.x_l * t_ns0
     return LinearisedProblem(
         features=terms.matrix(q0),
-        weights=1.0 / (gain**2 * var_q),
+        weights=1.0 / (gain**2 * var_q + extra_variance_k2),
         response=temps - gain * (q - q0),
     )
 
@@ -159,6 +169,8 @@ def solve_radiometric(
     terms = data.terms()
     temps, q, var_q = data.stacked()
     offsets = data.temperature_variances()
+    gamma_std = data.reflection_errors()
+    gammas = np.stack([s.gamma for s in data.sources.values()])
     offset_var = offsets if np.any(offsets > 0) else None
     coefficient_prior = prior.coefficients
 
@@ -174,9 +186,13 @@ def solve_radiometric(
         normal = _normal_equations(start, b, largest, ridge(largest))
         for _ in range(iterations):
             theta = operating_point(normal, b, largest)
-            normal = _normal_equations(
-                linearise(terms, temps, q, var_q, theta), b, largest, ridge(largest), offset_var
-            )
+            extra: FloatArray | float = 0.0
+            if gamma_std is not None:
+                extra = temperature_variance(
+                    theta[:, None, :], gammas, data.gamma_rec, q, gamma_std
+                )
+            problem = linearise(terms, temps, q, var_q, theta, extra)
+            normal = _normal_equations(problem, b, largest, ridge(largest), offset_var)
         return normal
 
     def operating_point(normal: NormalEquations, b: FloatArray, largest: Orders) -> FloatArray:

@@ -204,6 +204,7 @@ def simulate_source(
             rng.standard_normal(gamma.shape) + 1j * rng.standard_normal(gamma.shape)
         ) / np.sqrt(2)
     temp = np.broadcast_to(np.asarray(temperature_k, dtype=float), freq_hz.shape).copy()
+    known_error = vna_sigma if rng is not None and vna_sigma > 0 else None
     return SourceData(
         name=name,
         gamma=gamma,
@@ -212,6 +213,7 @@ def simulate_source(
         p_ns=noisy[2],
         integration=integration,
         temperature_k=temp if known_temperature else None,
+        gamma_std=known_error,
     )
 
 

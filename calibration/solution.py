@@ -9,7 +9,9 @@ The predictive distribution of ``T_src`` (eq. 3.41) has two independent parts:
   source calibrated with this solution (Student-t with the posterior's dof, eq. 3.42);
 * the source's own measurement noise: for the radiometric solver
   ``(X_L T_NS)^2 s^2 var(Q_src)`` per channel from the radiometer equation; for the thesis
-  solver its homoscedastic ``sigma^2 = b*/a*`` (eq. 4.3).
+  solver its homoscedastic ``sigma^2 = b*/a*`` (eq. 4.3); plus, when the source's
+  reflection error is known, its effect on the calibrated temperature
+  (:mod:`calibration.reflection_noise`).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from .data import SourceData, check_source
 from .errors import InvalidDataError
 from .noise_waves import INDEX, PARAMETERS, design_terms
 from .polynomial_model import Orders, PolynomialParameters, coefficient_slices, design_rows
+from .reflection_noise import temperature_variance
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -195,6 +198,11 @@ class Solution:
             t_ns = self.evaluate(freq)[INDEX["NS"]]
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * t_ns) * np.sqrt(post.noise_variance * var_q)
+        if source.gamma_std is not None:
+            var_gamma = temperature_variance(
+                self.evaluate(freq), source.gamma, gamma_rec, source.q, source.gamma_std
+            )
+            std_meas = np.sqrt(std_meas**2 + var_gamma)
         return CalibratedSpectrum(
             freq,
             mean,

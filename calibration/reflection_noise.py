@@ -1,0 +1,56 @@
+"""The VNA's random error on a source's reflection, carried into its temperature.
+
+A source's reflection enters the calibration equation (eq. 3.27) through the design
+terms (eqs. 3.22-3.25): ``T = x(Gamma, Q) . theta``. A measured ``Gamma = Gamma_true + e``,
+``e`` a circular complex error of rms ``sigma`` (real and imaginary parts each of variance
+``sigma^2 / 2``, independent between channels: the trace noise of a sweep), moves ``T``
+by ``J_re Re(e) + J_im Im(e)`` to first order, so::
+
+    var_T = (J_re^2 + J_im^2) sigma^2 / 2,      J = dT / d(Re, Im) Gamma
+
+``J`` by central differences: the design terms hold ``|Gamma|^2`` and are not holomorphic.
+For a calibrator, this variance sits in the residual of each of its rows (the radiometric
+solver adds it to the row's radiometer variance, about its operating point); for a
+calibrated source, in its predictive (:meth:`calibration.solution.Solution.calibrate`).
+
+Not covered: the receiver's own reflection (its error is common to every source at a
+channel, so it is not a per-row variance), and the VNA's systematic errors (thesis table
+2.3), which are correlated across channels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .noise_waves import design_terms, source_temperature
+
+FloatArray = NDArray[np.float64]
+
+#: Step of the central differences: far above rounding (|Gamma| <= 1), far below any
+#: structure of the design terms in Gamma.
+STEP = 1e-6
+
+
+def temperature_variance(
+    theta: FloatArray,
+    gamma: ArrayLike,
+    gamma_rec: ArrayLike,
+    q: ArrayLike,
+    gamma_std: ArrayLike,
+) -> FloatArray:
+    """``var_T`` (K^2) of the module docstring, per channel (shape of ``gamma``).
+
+    ``theta`` is ``(5, n_channels)`` (or broadcasting), ``gamma_std`` the complex rms
+    error of ``gamma``.
+    """
+    g = np.asarray(gamma, dtype=complex)
+
+    def slope(step: complex) -> FloatArray:
+        up = source_temperature(theta, design_terms(g + step, gamma_rec), q)
+        down = source_temperature(theta, design_terms(g - step, gamma_rec), q)
+        return np.asarray((up - down) / (2 * STEP), dtype=float)
+
+    j_re, j_im = slope(STEP), slope(1j * STEP)
+    sigma = np.asarray(gamma_std, dtype=float)
+    return np.asarray((j_re**2 + j_im**2) * sigma**2 / 2.0, dtype=float)

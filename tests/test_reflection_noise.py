@@ -1,0 +1,70 @@
+"""The VNA's random reflection error, carried into calibrator rows and calibrated spectra."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from calibration.noise_waves import design_terms, source_temperature
+from calibration.radiometric_solver import solve_radiometric
+from calibration.reflection_noise import temperature_variance
+from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+
+WIDTH = 8 * ITPM_CHANNEL_WIDTH_HZ  # 820 channels
+VNA_SIGMA = 1e-3
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_first_order_variance_matches_monte_carlo(seed):
+    """var_T from the derivatives equals the spread of T under drawn reflection errors."""
+    run = simulate_run(SimulationConfig(channel_width_hz=WIDTH), rng=seed)
+    rng = np.random.default_rng(seed)
+    theta = run.truth.theta(run.data.freq_hz)
+    for name in ("cold", "c10open", "r25"):
+        src = run.data.sources[name]
+        sigma = 10 ** rng.uniform(-4, -2)
+        predicted = temperature_variance(theta, src.gamma, run.data.gamma_rec, src.q, sigma)
+        draws = src.gamma + sigma * (
+            rng.standard_normal((4000, src.gamma.size))
+            + 1j * rng.standard_normal((4000, src.gamma.size))
+        ) / np.sqrt(2)
+        temps = source_temperature(theta, design_terms(draws, run.data.gamma_rec), src.q)
+        ratio = np.var(temps, axis=0) / predicted
+        # 4000 draws: a variance is known to sqrt(2/4000) = 2.2 %; the median of 820 is tighter
+        assert abs(np.median(ratio) - 1.0) < 0.02, name
+        assert np.all(np.abs(ratio - 1.0) < 0.15), name
+
+
+def _stripped(source):
+    return replace(source, gamma_std=None)
+
+
+@pytest.mark.parametrize("integration_s", [120.0, 1800.0])
+def test_reflection_error_makes_the_predictive_honest(integration_s):
+    """With VNA noise comparable to the radiometer's, the predictive matches the actual
+    error once the reflection error is modelled; ignored, the noise scale s^2 absorbs it
+    and inflates the antenna's radiometer term instead. (s^2 stays above 1 either way: the
+    receiver reflection's error, common to every source at a channel, is not modelled.)"""
+    ratios, scales, ignored_scales = [], [], []
+    for seed in range(10):
+        config = SimulationConfig(
+            channel_width_hz=WIDTH, integration_s=integration_s, vna_sigma=VNA_SIGMA
+        )
+        run = simulate_run(config, rng=100 + seed)
+        data = run.data
+        solution = solve_radiometric(data)
+        spectrum = solution.calibrate(
+            data.freq_hz, data.gamma_rec, run.validation, data.channel_width_hz
+        )
+        error = spectrum.mean - run.validation_temperature_k
+        ratios.append(np.sqrt(np.mean(error**2) / np.mean(spectrum.std**2)))
+        scales.append(solution.posterior.noise_variance)
+        bare = replace(data, sources={n: _stripped(s) for n, s in data.sources.items()})
+        ignored_scales.append(solve_radiometric(bare).posterior.noise_variance)
+    rms_ratio = float(np.sqrt(np.mean(np.square(ratios))))
+    # 10 runs x 820 channels; the channels are correlated through the calibration error,
+    # so the ratio scatters by a few percent run to run.
+    assert 0.9 < rms_ratio < 1.1
+    assert np.median(ignored_scales) > 1.3 * np.median(scales)
