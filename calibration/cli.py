@@ -53,6 +53,7 @@ from .hdf5_io import (
     write_run,
     write_solution,
 )
+from .identifiability import prior_dominated_line
 from .noise_floor import noise_floor
 from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .polynomial_model import coefficient_slices
@@ -158,6 +159,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))} ({how})")
     if solution.models_line():
         print(f"averaged over models (orders, weight): {solution.models_line()}")
+    if prior_dominated_line(solution):
+        print(prior_dominated_line(solution))
     print(f"log evidence: {post.log_evidence:.3f}")
     print(_noise_line(solution))
     print(f"wrote {args.output}")
@@ -223,6 +226,8 @@ def cmd_summary(args: argparse.Namespace) -> int:
     print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))}")
     if solution.models_line():
         print(f"averaged over models (orders, weight): {solution.models_line()}")
+    if prior_dominated_line(solution):
+        print(prior_dominated_line(solution))
         print(f"posterior layout (the models' envelope): {solution.orders}")
     at_ceiling = solution.metadata.get("orders_at_ceiling") or []
     if at_ceiling:

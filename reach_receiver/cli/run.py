@@ -29,6 +29,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import FrameType
 
+from calibration.identifiability import prior_dominated_line
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig, find_site, load_site
 from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
@@ -277,6 +278,8 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
     print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
     if solution.models_line():
         print(f"  averaged over models (orders, weight): {solution.models_line()}")
+    if prior_dominated_line(solution):
+        print(f"  {prior_dominated_line(solution)}")
     print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
     floor, predicted = outcome.floor_k, outcome.predicted_k
     print(
