@@ -73,6 +73,7 @@ class RunWatch:
         self.taken: list[Reading] = []
         self.safe_points = 0
         self.safe_point_s = 0.0  # real seconds spent sampling at safe points
+        self.safe_point_max_s = 0.0  # the longest of them (real s)
         self._last_active = -math.inf
         self._last_point = time.monotonic()
         self._last_stats: SpectrometerStatistics | None = None
@@ -109,6 +110,7 @@ class RunWatch:
         self._last_point = time.monotonic()
         self.safe_points += 1
         self.safe_point_s += self._last_point - started
+        self.safe_point_max_s = max(self.safe_point_max_s, self._last_point - started)
 
     def passive(self, now: float) -> list[Reading]:
         """What the run read anyway: the spectrometer's counters, the temperature log."""
@@ -170,6 +172,7 @@ class Monitor:
         self._devices = threading.RLock()  # held while the monitor talks to devices
         self._record_lock = threading.Lock()
         self._run: RunWatch | None = None
+        self.last_watch: RunWatch | None = None  # the latest run's (its safe-point times)
         self._run_mode = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -243,7 +246,7 @@ class Monitor:
         self.hand_over()
         devices.ports = {**self.ports, **devices.ports}
         watch = RunWatch(self, devices, spectrometer, temperature_log)
-        self._run = watch
+        self._run = self.last_watch = watch
         return watch
 
     def run_ended(self, watch: RunWatch | None = None) -> None:
