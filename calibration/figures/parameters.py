@@ -4,8 +4,8 @@
   against frequency, and beside it its departure from that mean with the 68 % and 95 %
   credible bands (the bands are a few mK to K on parameters of hundreds of K, invisible on
   the left). A model-averaged posterior (:class:`~calibration.averaging.MixturePosterior`)
-  gives its bands as quantiles of draws from the mixture; a single model (or a solution
-  read from a file, which keeps the mixture's moments) as Student-t quantiles of
+  gives its bands as quantiles of draws from the mixture (solution files keep its
+  components); a single model as Student-t quantiles of
   :meth:`~calibration.solution.Solution.parameter_std`.
 * :func:`evidence_landscape` (thesis fig. 4.5): the evidence profile over each
   parameter's order, and the leading models with their weights.
@@ -37,7 +37,7 @@ FloatArray = NDArray[np.float64]
 #: Credible levels of the bands.
 LEVELS = (0.68, 0.95)
 #: Draws from a mixture posterior for its quantiles.
-MIXTURE_DRAWS = 4000
+MIXTURE_DRAWS = 2000
 #: Models listed in the evidence figure.
 TOP_MODELS = 12
 #: Delta log Z is linear within this many nats of the best, logarithmic beyond.
@@ -52,9 +52,10 @@ def parameter_bands(
     bands: dict[float, tuple[FloatArray, FloatArray]] = {}
     if isinstance(solution.posterior, MixturePosterior):
         draws = solution.sample_parameters(freq_hz, MIXTURE_DRAWS, np.random.default_rng(seed))
-        for level in LEVELS:
-            lo, hi = np.quantile(draws - mean, [0.5 - level / 2, 0.5 + level / 2], axis=0)
-            bands[level] = (lo, hi)
+        probabilities = [0.5 + sign * level / 2 for level in LEVELS for sign in (-1, 1)]
+        quantiles = np.quantile(draws, probabilities, axis=0) - mean
+        for i, level in enumerate(LEVELS):
+            bands[level] = (quantiles[2 * i], quantiles[2 * i + 1])
         return mean, bands
     std = solution.parameter_std(freq_hz)
     dof = solution.posterior.dof
@@ -70,7 +71,7 @@ def noise_wave_parameters(
     solution: Solution,
     freq_hz: FloatArray | None = None,
     truth: PolynomialParameters | None = None,
-    n_channels: int = 400,
+    n_channels: int = 200,
 ) -> Figure:
     """The five noise-wave parameters (K) against frequency, with 68/95 % bands.
 
