@@ -46,9 +46,14 @@ FloatArray = NDArray[np.float64]
 PRIOR_DOMINATED = 0.1
 #: Median ``|Gamma|`` below which a calibrator counts as matched in messages.
 MATCHED = 0.3
-#: T_NS's posterior sd may reach this fraction of T_NS itself. Beyond it the Gauss-Newton
-#: step about T_NS is no longer a small correction and the posterior is not a Gaussian one.
-NS_RELATIVE_LIMIT = 0.1
+#: T_NS's posterior sd may reach this fraction of T_NS itself. T_NS is the gain: a
+#: determined one is known to 1e-4-1e-3 of itself (three or twelve loads at the radiometer
+#: noise), to 1.2 % in the thesis's noisiest tests (1 K of homoscedastic noise). With only
+#: one matched load (hot, open, short) the data pin T_NS through the polynomials'
+#: smoothness alone: over 40 seeds its relative sd was 9 % to 190 %, and the likelihood
+#: has spurious modes (T_NS = 57 +- 5 K against a true 1100 K, fitting as well) that the
+#: local posterior cannot see. The limit sits between the two.
+NS_RELATIVE_LIMIT = 0.05
 
 
 class UndeterminedError(IllPosedError):
