@@ -159,7 +159,7 @@ def evidence_landscape(solution: Solution) -> Figure:
     prof_ax.set_title(f"evidence profile ({len(table)} models; ★ best)")
     prof_ax.set_yscale("symlog", linthresh=LINEAR_NATS)
     prof_ax.set_ylim(top=3)
-    prof_ax.legend(loc="center right", ncols=1)
+    fig.legend(*prof_ax.get_legend_handles_labels(), loc="outside lower center", ncols=5)
 
     weights = {
         tuple(w["orders"]): float(w["weight"])
@@ -174,11 +174,14 @@ def evidence_landscape(solution: Solution) -> Figure:
     top_ax.set_yticks(y, labels, fontfamily="monospace")
     top_ax.invert_yaxis()
     top_ax.set_xlabel(r"$\Delta\log Z$ from the best (nats)")
-    top_ax.set_title("leading models (orders unc,cos,sin,NS,L): weight")
     span = min(deltas) if min(deltas) < 0 else -1.0
-    for yi, (orders, _) in zip(y, ranked, strict=True):
-        weight = weights.get(tuple(orders))
-        text = f"{weight:.3f}" if weight is not None else "—"
-        top_ax.text(span * 1.02, yi, text, va="center", ha="right", fontsize=9)
-    top_ax.set_xlim(span * 1.25, 0.05 * abs(span))
+    top_ax.set_ylabel("orders (unc, cos, sin, NS, L)")
+    top_ax.set_title("leading models")
+    if weights:  # an averaged solution: each model's weight in the mixture
+        top_ax.set_title("leading models and their weights in the average")
+        for yi, (orders, _) in zip(y, ranked, strict=True):
+            weight = weights.get(tuple(orders))
+            text = f"{weight:.3f}" if weight is not None else "—"
+            top_ax.text(span * 1.02, yi, text, va="center", ha="right", fontsize=9)
+    top_ax.set_xlim(span * (1.25 if weights else 1.05), 0.05 * abs(span))
     return fig
