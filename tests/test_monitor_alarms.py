@@ -20,9 +20,12 @@ import urllib.request
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
+from reach_receiver.cli import remote
 from reach_receiver.config.daemon import DaemonSettings
 from reach_receiver.config.monitoring import DEFAULT_ALARMS, MonitoringSettings
 from reach_receiver.config.site import replace_devices
+from reach_receiver.daemon.client import DaemonClient
+from reach_receiver.daemon.control import SOCKET_FILE
 from reach_receiver.daemon.service import Daemon, Directories
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
@@ -160,6 +163,31 @@ def test_an_injected_fault_raises_its_alarm_within_two_cadences_and_clears(
     assert f"raised {name}" in hooked.read_text()
 
 
+def test_status_shows_the_raised_alarm_and_the_latest_readings(idle_daemon, capsys):
+    # before the unplug test: a board plugged in again starts with the TEC's rail off
+    reachd, sim, _, _ = idle_daemon
+    alarm_id = "tec fault: reach_tec_fault_bits"
+    board = reachd.monitor.board
+    sim.tec.set_fault_bits(8)
+    try:
+        until(lambda: alarm_id in board.active, timeout_s=30)
+        until(lambda: "health alarm: tec fault" in reachd._status, timeout_s=10)  # systemd's
+        with DaemonClient(reachd.dirs.runtime / SOCKET_FILE) as client:
+            assert remote.steer(client, "status") == 0
+    finally:
+        sim.tec.set_fault_bits(0)
+        until(lambda: alarm_id not in board.active, timeout_s=30)
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("idle; health alarm: tec fault: reach_tec_fault_bits = 8")
+    assert "  ! tec fault: reach_tec_fault_bits = 8, above 0.5" in lines
+    shown = {line.split()[0]: line for line in lines if line.startswith("  ") and
+             not line.startswith("  !")}
+    assert shown["tec_fault_bits"].split()[1:] == ["8", "[error]"]
+    assert shown["disk_free_bytes"].split()[-1] == "GB"
+    assert shown["tc08_temperature_celsius"].split()[1:3] == ["0,", "cold"]
+    assert "health alarm" not in reachd.status_line()
+
+
 def test_an_unplugged_front_end_raises_the_silent_device_alarm_and_clears(idle_daemon):
     reachd, sim, link, _ = idle_daemon
 
@@ -179,3 +207,4 @@ def test_an_unplugged_front_end_raises_the_silent_device_alarm_and_clears(idle_d
     assert link_state.reconnects >= 1
     assert link_state.errors >= 1
     assert not [a for a in status["alarms"] if "teensy" in a]
+

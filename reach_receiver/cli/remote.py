@@ -17,6 +17,8 @@ from reach_receiver.daemon.protocol import ControlError
 from reach_receiver.schedule.steps import Schedule
 from reach_receiver.schedule.timing import hms
 
+from .health import format_health
+
 
 def submit(client: DaemonClient, schedule: Schedule, path: str, detach: bool) -> int:
     """Send a compiled schedule's files; follow the job unless ``detach``."""
@@ -88,6 +90,8 @@ def steer(client: DaemonClient, op: str, **fields: Any) -> int:
             print(f"queued: {', '.join(map(str, answer['queue']))}")
         for name, at in sorted(answer.get("timers", {}).items()):
             print(f"timer {name}: next at {at:.0f} (Unix s)")
+        for line in format_health(answer.get("health")):
+            print(line)
     elif op == "queue":
         for job in answer["jobs"]:
             line = f"{job['id']:>5} {job['state']:<11} {job['name']}  {job['origin']}"

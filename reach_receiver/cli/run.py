@@ -49,6 +49,7 @@ from reach_receiver.sim.receiver import (
 
 from . import remote
 from .display import PlainProgress, RichProgressDisplay
+from .health import metrics_main
 from .logs import add_version, configure_logging
 
 log = logging.getLogger(__name__)
@@ -99,7 +100,10 @@ def parser() -> argparse.ArgumentParser:
         "--attach", nargs="?", type=int, const=0, metavar="JOB",
         help="follow a job again (the current one by default)",
     )
-    daemon.add_argument("--status", action="store_true", help="the daemon's state")
+    daemon.add_argument(
+        "--status", action="store_true",
+        help="the daemon's state, alarms and latest readings (also: reach-run status)",
+    )
     daemon.add_argument("--queue", action="store_true", help="its jobs")
     daemon.add_argument("--cancel", type=int, metavar="JOB", help="drop or stop a job")
     daemon.add_argument("--abort", action="store_true", help="stop the run now, go safe")
@@ -111,8 +115,18 @@ def parser() -> argparse.ArgumentParser:
 
 
 def run_main(argv: Sequence[str] | None = None) -> int:
-    """``reach-run``: validate, then run a schedule; exit 0 only if it completed."""
-    args = parser().parse_args(argv)
+    """``reach-run``: validate, then run a schedule; exit 0 only if it completed.
+
+    ``reach-run metrics ...`` and ``reach-run status ...`` are the health commands
+    (:mod:`.health`; ``status`` is ``--status``): a schedule is a YAML file, so a schedule
+    literally named ``metrics`` or ``status`` is given as ``./metrics``.
+    """
+    words = list(sys.argv[1:] if argv is None else argv)
+    if words[:1] == ["metrics"]:
+        return metrics_main(words[1:])
+    if words[:1] == ["status"]:
+        words = ["--status", *words[1:]]
+    args = parser().parse_args(words)
     configure_logging(args.verbose)
     settings = SimulationSettings(
         compression=args.compression,

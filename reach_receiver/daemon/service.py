@@ -232,7 +232,7 @@ class Daemon:
         return serving and (not running or (self._worker is not None and self._worker.is_alive()))
 
     def status_line(self) -> str:
-        """One line for systemd and the log: state, job and step."""
+        """One line for systemd and the log: state, job and step, alarms (health: the first)."""
         text: str = self.machine.state
         if self.current is not None:
             text += f": job {self.current.id} {self.current.name}"
@@ -242,6 +242,10 @@ class Daemon:
             text += " (queue paused)"
         if self.alarms:
             text += f"; alarm: {'; '.join(self.alarms.values())}"
+        health = self.monitor.alarms()
+        if health:
+            more = f" (+{len(health) - 1} more)" if len(health) > 1 else ""
+            text += f"; health alarm: {health[0]}{more}"
         return text
 
     # ----------------------------------------------------------------- jobs
