@@ -29,7 +29,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from .fields import REQUIRED, Fields, type_name
 from .yaml_lines import LineDict, LineList, Problem
@@ -143,3 +143,24 @@ def _timer(timer: Fields, base: Path) -> TimerSettings:
         timer.report("<when>", "give exactly one of at_lst_h, at_utc", timer.args.line)
     path = Path(schedule)
     return TimerSettings(name, path if path.is_absolute() else base / path, lst, utc)
+
+
+def daemon_yaml(daemon: DaemonSettings) -> dict[str, Any]:
+    """The ``daemon`` section that :func:`read_daemon` reads back as ``daemon``."""
+    out: dict[str, Any] = {"resume": daemon.resume}
+    if daemon.runtime_dir is not None:
+        out["runtime_dir"] = str(daemon.runtime_dir)
+    if daemon.state_dir is not None:
+        out["state_dir"] = str(daemon.state_dir)
+    out["missed"] = {"policy": daemon.missed_policy, "window_s": daemon.missed_window_s}
+    if daemon.timers:
+        out["timers"] = [
+            {
+                "name": t.name,
+                "schedule": str(t.schedule),
+                **({"at_lst_h": t.at_lst_h} if t.at_lst_h is not None else {}),
+                **({"at_utc": t.at_utc} if t.at_utc is not None else {}),
+            }
+            for t in daemon.timers
+        ]
+    return out

@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from .fields import Fields, type_name
 from .yaml_lines import LineDict, LineList, Problem
@@ -175,3 +175,44 @@ def _alarm(f: Fields, known: Mapping[str, AlarmRule]) -> AlarmRule | None:
         "warn" if severity == "warn" else "error",
         {str(k): str(v) for k, v in labels.items()}, enabled is not False,
     )
+
+
+def monitoring_yaml(settings: MonitoringSettings) -> dict[str, Any]:
+    """The ``monitoring`` section that :func:`read_monitoring` reads back as ``settings``.
+
+    Only what differs from the defaults is written; of the alarms, those that differ
+    from (or are not among) :data:`DEFAULT_ALARMS`, by name.
+    """
+    base = MonitoringSettings()
+    out: dict[str, Any] = {}
+    if settings.cadence_s != base.cadence_s:
+        out["cadence_s"] = settings.cadence_s
+    if settings.database is not None:
+        out["database"] = str(settings.database)
+    if (settings.minute_days, settings.quarter_days) != (base.minute_days, base.quarter_days):
+        out["retention"] = {"minute_days": settings.minute_days,
+                            "quarter_days": settings.quarter_days}
+    if settings.prometheus_port is not None:
+        out["prometheus"] = {"port": settings.prometheus_port}
+    if settings.hook:
+        out["hook"] = {"command": list(settings.hook), "timeout_s": settings.hook_timeout_s}
+    defaults = {rule.name: rule for rule in DEFAULT_ALARMS}
+    changed = [rule for rule in settings.alarms if defaults.get(rule.name) != rule]
+    if changed:
+        out["alarms"] = [_alarm_yaml(rule) for rule in changed]
+    return out
+
+
+def _alarm_yaml(rule: AlarmRule) -> dict[str, Any]:
+    out: dict[str, Any] = {"name": rule.name, "metric": rule.metric}
+    if rule.above is not None:
+        out["above"] = rule.above
+    if rule.below is not None:
+        out["below"] = rule.below
+    out["hysteresis"] = rule.hysteresis
+    out["severity"] = rule.severity
+    if rule.labels:
+        out["labels"] = dict(rule.labels)
+    if not rule.enabled:
+        out["enabled"] = False
+    return out

@@ -44,9 +44,9 @@ from reach_receiver.frontend.layout import (
     SourcePosition,
 )
 
-from .daemon import DAEMON_KEYS, DaemonSettings, read_daemon
+from .daemon import DAEMON_KEYS, DaemonSettings, daemon_yaml, read_daemon
 from .fields import REQUIRED, Fields, closest, type_name
-from .monitoring import MONITORING_KEYS, MonitoringSettings, read_monitoring
+from .monitoring import MONITORING_KEYS, MonitoringSettings, monitoring_yaml, read_monitoring
 from .settings import DEVICE_SCHEMAS, DeviceSettings, keys_of, read_settings
 from .yaml_lines import LineDict, Problem, ProblemsError, load_yaml, with_lines
 
@@ -136,7 +136,9 @@ class SiteConfig:
         if ports:
             document["thermocouples"] = ports
         if self.daemon != DaemonSettings():
-            document["daemon"] = _daemon_yaml(self.daemon)
+            document["daemon"] = daemon_yaml(self.daemon)
+        if monitoring_yaml(self.monitoring):
+            document["monitoring"] = monitoring_yaml(self.monitoring)
         return yaml.safe_dump(document, sort_keys=False)
 
 
@@ -332,26 +334,6 @@ def _thermocouples(reader: _Reader) -> dict[str, int]:
     return ports
 
 
-def _daemon_yaml(daemon: DaemonSettings) -> dict[str, Any]:
-    out: dict[str, Any] = {"resume": daemon.resume}
-    if daemon.runtime_dir is not None:
-        out["runtime_dir"] = str(daemon.runtime_dir)
-    if daemon.state_dir is not None:
-        out["state_dir"] = str(daemon.state_dir)
-    out["missed"] = {"policy": daemon.missed_policy, "window_s": daemon.missed_window_s}
-    if daemon.timers:
-        out["timers"] = [
-            {
-                "name": t.name,
-                "schedule": str(t.schedule),
-                **({"at_lst_h": t.at_lst_h} if t.at_lst_h is not None else {}),
-                **({"at_utc": t.at_utc} if t.at_utc is not None else {}),
-            }
-            for t in daemon.timers
-        ]
-    return out
-
-
 def _position_yaml(position: SourcePosition) -> dict[str, int]:
     out = {"ms1": position.ms1}
     if position.termination is not None:
@@ -409,11 +391,6 @@ def replace_devices(site: SiteConfig, **changes: Any) -> SiteConfig:
 
 
 __all__ = [
-    "DEFAULT_BAND_HZ",
-    "SiteConfig",
-    "SiteError",
-    "find_site",
-    "load_site",
-    "parse_site",
+    "DEFAULT_BAND_HZ", "SiteConfig", "SiteError", "find_site", "load_site", "parse_site",
     "replace_devices",
 ]
