@@ -6,6 +6,8 @@
                        [--band LO HI] [--calibrators a,b,...] [--vna-sigma X]
     reach-cal solve RUN.h5 -o SOLUTION.h5 [--method radiometric|thesis]
                     [--orders n_unc,n_cos,n_sin,n_NS,n_L | --max-orders ...] [--calibrators ...]
+                    [--band LO,HI] [--mask-band LO,HI] [--rfi] [--smooth-s11 P]
+                    [--check-consistency | --exclude-inconsistent [N]]  (cli_corrections)
     reach-cal apply SOLUTION.h5 RUN.h5 [--source ant] [-o OUT.h5] [--csv OUT.csv]
     reach-cal summary SOLUTION.h5 [--run RUN.h5 --source ant]
     reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,...  (calibration.cli_import)
@@ -40,6 +42,7 @@ from .cli_args import (
     output_arg,
     solver_from_args,
 )
+from .cli_corrections import add_correction_options, corrected_solve, noise_source_line
 from .cli_import import add_import_command
 from .cli_report import add_report_command
 from .cli_validate import add_validate_command
@@ -143,11 +146,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
         data = data.subset(args.calibrators)
     solve = solver_from_args(args)
     start = time.perf_counter()
-    solution = solve(data)
+    data, solution, prepared = corrected_solve(data, args, solve)
     elapsed = time.perf_counter() - start
     solution = replace(
         solution,
-        metadata={**solution.metadata, "run_file": str(args.run), "solve_time_s": elapsed},
+        metadata={
+            **solution.metadata, **prepared, "run_file": str(args.run), "solve_time_s": elapsed
+        },
     )
     write_solution(args.output, solution)
     post = solution.posterior
@@ -163,6 +168,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(prior_dominated_line(solution))
     print(f"log evidence: {post.log_evidence:.3f}")
     print(_noise_line(solution))
+    print(noise_source_line(solution, data.freq_hz))
     print(f"wrote {args.output}")
     return 0
 
@@ -248,6 +254,7 @@ def cmd_summary(args: argparse.Namespace) -> int:
     for orders, logz in table[: args.top]:
         print(f"  {','.join(map(str, orders)):<14} log Z = {logz:.3f}  (delta {logz - best:.3f})")
     print(_noise_line(solution))
+    print(noise_source_line(solution))
     if args.run:
         _floor_summary(solution, args.run, args.source)
     return 0
@@ -331,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
         "-o", "--output", type=output_arg, required=True, help="solution file to write (HDF5)"
     )
     add_solver_options(solve)
+    add_correction_options(solve)
 
     apply = command("apply", cmd_apply)
     apply.add_argument("solution", help="solution file (HDF5)")
