@@ -232,9 +232,9 @@ def cmd_summary(args: argparse.Namespace) -> int:
     print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))}")
     if solution.models_line():
         print(f"averaged over models (orders, weight): {solution.models_line()}")
+        print(f"posterior layout (the models' envelope): {solution.orders}")
     if prior_dominated_line(solution):
         print(prior_dominated_line(solution))
-        print(f"posterior layout (the models' envelope): {solution.orders}")
     at_ceiling = solution.metadata.get("orders_at_ceiling") or []
     if at_ceiling:
         print(
