@@ -285,7 +285,8 @@ class Monitor:
             with self._devices:
                 if not self._run_mode:
                     readings += self._idle.sample(self.links, self.ports)
-        now = self.clock.now()
+        # The daemon's own readings carry the sample's time, not the end of the device
+        # reads above (they stamp their own): the series then keep the cadence exactly.
         index = self.daemon_state()
         readings.append(Reading("reach_daemon_state", float(index), "1", now))
         readings += disk_readings(self.data_dir, now)
