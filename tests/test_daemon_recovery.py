@@ -199,8 +199,9 @@ def test_a_timer_fires_when_its_sidereal_time_comes(reach_sim, tmp_path):
     schedule.write_text("schedule: timed\nsteps:\n  - initialise: {rails: [12v, 24v]}\n  - safe\n")
     first = start_reachd(site_file(tmp_path, reach_sim))
     assert finish(first)[0] == 0
-    # 15 simulated minutes from now: 0.3 s of real time at 3000x.
-    at = lst_in(15, simulated_now(reach_sim))
+    # Three simulated hours from now: 3.6 s of real time at 3000x, more than the daemon
+    # takes to start (a trigger that passed while it started would wait a sidereal day).
+    at = lst_in(180, simulated_now(reach_sim))
     site = site_file(tmp_path, reach_sim, timers=[
         {"name": "soon", "schedule": str(schedule), "at_lst_h": at}])
     second = start_reachd(site)
