@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +32,6 @@ from numpy.typing import NDArray
 from .conjugate import LinearPosterior, ScalePrior, solve
 from .normal_equations import NormalEquations
 from .polynomial_model import Orders, full_indices
-from .shrinkage import ShrinkagePrior
 
 FloatArray = NDArray[np.float64]
 
@@ -95,10 +95,18 @@ def select_components(
     ]
 
 
+class GridPrior(Protocol):
+    """A coefficient prior given on a grid of widths: ``variances(orders)`` is ``(G, P)``."""
+
+    def variances(self, orders: Sequence[int]) -> FloatArray:
+        """Prior variance of every coefficient of ``orders`` at every grid point."""
+        ...
+
+
 def mixture_posterior(
     normal: NormalEquations,
     components: Sequence[tuple[Orders, int, float]],
-    prior: ShrinkagePrior,
+    prior: GridPrior,
     scale_prior: ScalePrior | None,
     log_evidence: float,
 ) -> MixturePosterior:

@@ -23,6 +23,7 @@ from .errors import IllPosedError
 from .normal_equations import NormalEquations
 from .order_search import search_orders, search_orders_jointly
 from .polynomial_model import Orders, as_orders
+from .scale_fit import ParameterScales, fit_scales
 from .shrinkage import ShrinkagePrior, log_evidence_scales, marginal_log_evidence
 
 Prior = CoefficientPrior | ShrinkagePrior
@@ -142,11 +143,24 @@ def _fit_shrinkage(
     average: bool,
     skipped: dict[Orders, str],
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
-    """:func:`fit` with the prior scale marginalised and the models averaged."""
+    """:func:`fit` with the prior scale marginalised (or fitted per parameter), averaged."""
     grids: dict[Orders, np.ndarray] = {}
+    widths: ShrinkagePrior | ParameterScales = prior
+    if prior.per_parameter:
+        widths = fit_scales(normal, prior, scale_prior)
+
+    def grid(orders: Orders) -> np.ndarray:
+        if isinstance(widths, ShrinkagePrior):
+            return log_evidence_scales(normal, orders, widths, scale_prior)
+        variances = widths.variances(orders)[0]
+        try:
+            post = solve(normal, orders, np.zeros(variances.size), variances, scale_prior)
+        except IllPosedError:
+            return np.array([-np.inf])
+        return np.array([post.log_evidence])
 
     def log_evidence(orders: Orders) -> float:
-        grids[orders] = log_evidence_scales(normal, orders, prior, scale_prior)
+        grids[orders] = grid(orders)
         value = marginal_log_evidence(grids[orders])
         if not np.isfinite(value):
             skipped[orders] = "the data and prior give it no finite evidence at any prior scale"
@@ -170,7 +184,7 @@ def _fit_shrinkage(
         raise IllPosedError("no model between the order limits is constrained by the data")
     pool = grids if average else {best: grids[best]}
     components = select_components(pool)
-    return mixture_posterior(normal, components, prior, scale_prior, table[best]), table
+    return mixture_posterior(normal, components, widths, scale_prior, table[best]), table
 
 
 @dataclass(frozen=True)

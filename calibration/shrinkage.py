@@ -79,6 +79,9 @@ class ShrinkagePrior:
         The values of ``rho``, the ratio of successive terms' prior widths, from none
         (1) to strong (0.03); a term's width is at most :data:`MAX_NARROWING` times
         narrower than the first-order term's.
+    per_parameter
+        Give each parameter its own ``tau``, set by the data at the largest model
+        (:mod:`calibration.scale_fit`), instead of one marginalised ``tau`` for all five.
     """
 
     constant_sd_k: float = 3000.0
@@ -86,6 +89,7 @@ class ShrinkagePrior:
     tau_max_k: float = 3000.0
     n_scales: int = 38
     decays: tuple[float, ...] = (1.0, 0.3, 0.1, 0.03)
+    per_parameter: bool = False
 
     def __post_init__(self) -> None:
         if not (0 < self.tau_min_k < self.tau_max_k and self.constant_sd_k > 0):
