@@ -17,6 +17,8 @@ from pathlib import Path
 from types import FrameType
 
 from reach_receiver.errors import ReceiverError
+from reach_receiver.sim.effects import SimEffects
+from reach_receiver.sim.physics import PhysicsConfig
 from reach_receiver.sim.receiver import (
     DEFAULT_COMPRESSION,
     SimulatedReceiver,
@@ -52,6 +54,12 @@ def _sim_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--site-out", type=Path, help="also write the site file here")
     parser.add_argument(
+        "--effects",
+        action="store_true",
+        help="an MTS two-port, cables warmer at one end, a cable-cooled hot load, RFI spikes "
+        "(reach_receiver.sim.effects); the site file then describes their corrections",
+    )
+    parser.add_argument(
         "--run-for", type=float, default=None, help="stop after this many real seconds"
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log what the sims do")
@@ -65,7 +73,10 @@ def sim_main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args.verbose)
     period = args.spectrum_period or spectrum_period_for(args.compression)
     settings = SimulationSettings(
-        compression=args.compression, spectrum_period_s=period, seed=args.seed
+        compression=args.compression,
+        spectrum_period_s=period,
+        seed=args.seed,
+        physics=PhysicsConfig(effects=SimEffects.all() if args.effects else SimEffects()),
     )
     stop = threading.Event()
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,7 @@ from reach_receiver.frontend.layout import (
     VNA_STANDARDS,
     source_at,
 )
+from reach_receiver.sim.effects import SimEffects
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -74,6 +75,7 @@ class PhysicsConfig:
     outdoor_c: float = 18.0
     outdoor_swing_c: float = 8.0
     seed: int = 0
+    effects: SimEffects = field(default_factory=SimEffects)
 
 
 class ReceiverPhysics:
@@ -180,7 +182,12 @@ class ReceiverPhysics:
     def reflection_at_vna(self, freq_hz: FloatArray) -> ComplexArray:
         """What the VNA measures at its port now, before its own error model."""
         self.sync_pins()
-        return self.reflection(self.vna_target(), freq_hz)
+        target = self.vna_target()
+        gamma = self.reflection(target, freq_hz)
+        if target in (*VNA_STANDARDS, OPEN, "lna"):
+            return gamma
+        f = np.clip(np.asarray(freq_hz, dtype=float), 1.0, None)
+        return self.config.effects.at_vna(gamma, f)
 
     # ----------------------------------------------------------------- temperatures
     def enclosure_k(self) -> float:
@@ -209,12 +216,15 @@ class ReceiverPhysics:
     def thermocouples_c(self, t: float) -> list[float]:
         """True temperatures of TC-08 ports 0-8 (table 2.2), degrees C."""
         enclosure = self.enclosure_k() - KELVIN_AT_0C
+        terminations = enclosure
+        if self.config.effects.cable_gradient:
+            terminations += self.config.effects.termination_above_cable_k
         return [
             enclosure + 1.0,
             enclosure,
             self.hot_k(t) - KELVIN_AT_0C,
-            enclosure,
-            enclosure,
+            terminations,
+            terminations,
             enclosure,
             enclosure,
             enclosure + self.config.lna_above_enclosure_k,
@@ -230,14 +240,53 @@ class ReceiverPhysics:
     # ----------------------------------------------------------------- spectra
     def _noiseless_power(self, name: str, t: float) -> FloatArray:
         """``P = g (T_src (1-|G|^2)|F|^2 + noise waves + T_0)`` for the source at the LNA."""
-        gamma = self.reflection(name, self._model_freq)
         t_src: float | FloatArray = self.source_temperature_k(name, t)
         if name == NOISE_SOURCE and self._on("ns"):
             t_src = self.enclosure_k() + self._enr_k
         elif name == "ant":
             t_src = self.sky_temperature_k(self._model_freq, t)
+        return self._power(name, t_src, t)
+
+    def _power(self, name: str, t_src: float | FloatArray, t: float) -> FloatArray:
+        """The LNA's noiseless power for ``name`` at ``t_src`` (its own plane; effects on)."""
+        effects = self.config.effects
+        f = self._model_freq
+        gamma = self.reflection(name, f)
+        if effects.any:
+            cable = effects.cables().get(name)
+            if cable is not None and isinstance(t_src, float):
+                t_cab = self.thermocouples_c(t)[cable[1]] + KELVIN_AT_0C
+                t_term = self.thermocouples_c(t)[self.thermocouple_of(name)] + KELVIN_AT_0C
+                t_src = effects.through_cable(name, gamma, f, t_term, t_cab)
+            gamma, t_src = effects.through_mts(gamma, t_src, f, self.enclosure_k())
         p, _, _ = dicke_powers(self._theta, gamma, self._gamma_rec, t_src, self._gain, self._offset)
         return np.asarray(p, dtype=float)
+
+    def true_temperature_k(self, name: str, q: FloatArray, freq_hz: FloatArray) -> FloatArray:
+        """The temperature at the sources' plane that gives the measured ``q`` (eq. 3.21).
+
+        The forward model is linear in the source's temperature, ``P = P_0 + T dP``, so
+        ``T = (Q (P_NS - P_L) + P_L - P_0) / dP`` with the noiseless references: with or
+        without :mod:`~reach_receiver.sim.effects`, the truth a calibration is judged by.
+        ``freq_hz`` must be channel centres of the spectrometer.
+        """
+        k = np.rint(np.asarray(freq_hz) / self.config.channel_width_hz).astype(int)
+        t = self._t0
+        p0 = self._power(name, np.zeros(self._model_freq.shape), t)[k]
+        dp = self._power(name, np.ones(self._model_freq.shape), t)[k] - p0
+        p_l = self._noiseless_power(REFERENCE_LOAD, t)[k]
+        with self._lock:
+            ns_on = self._pins.get("ns")
+            self._pins["ns"] = "1"
+        try:
+            p_ns = self._noiseless_power(NOISE_SOURCE, t)[k]
+        finally:
+            with self._lock:
+                if ns_on is None:
+                    self._pins.pop("ns")
+                else:
+                    self._pins["ns"] = ns_on
+        return np.asarray((np.asarray(q) * (p_ns - p_l) + p_l - p0) / dp, dtype=float)
 
     def sky_temperature_k(self, freq_hz: FloatArray, t: float) -> FloatArray:
         """A sky-like antenna temperature: a power law, ``T = 2000 K (f / 75 MHz)^-2.5``."""
@@ -256,6 +305,12 @@ class ReceiverPhysics:
         radiometer = 1.0 / math.sqrt(self.config.channel_width_hz * duration_s)
         if self._on("6v"):
             p0 = self._noiseless_power(self.lna_input(), t_mid)
+            if self.config.effects.rfi:
+                with self._lock:
+                    n_lines = len(self.config.effects.rfi_channels_hz)
+                    draws = np.asarray(self._rng.exponential(size=n_lines), dtype=float)
+                spikes = self.config.effects.spikes(np.asarray(self.freq_hz, dtype=float), draws)
+                p0 = np.asarray(p0 * (1.0 + spikes), dtype=float)
         else:
             p0 = np.full(self.freq_hz.shape, 1e-10 * float(np.mean(self._gain)))
         p1 = self._noiseless_power(REFERENCE_LOAD, t_mid)

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from reach_receiver.clock import Clock, CompressedClock
+from reach_receiver.config.corrections import CableSettings, CorrectionSettings
 from reach_receiver.config.settings import (
     DeviceSettings,
     SpectrometerSettings,
@@ -177,6 +178,7 @@ class SimulatedReceiver:
         self.teensy: FirmwareTeensy | None = None
         self.tc08: Tc08StandIn | None = None
         self.test_load_reference = self.workdir / "test_load_reference.s1p"
+        self._two_ports: dict[str, str] = {}
         self._stop = threading.Event()
         self._sensor_thread: threading.Thread | None = None
         self._started = False
@@ -205,6 +207,7 @@ class SimulatedReceiver:
         )
         self.tc08.start()
         self.test_load_reference = self._write_test_load_reference()
+        self._two_ports = self.physics.config.effects.write_two_ports(self.workdir)
         self._started = True
         log.info("simulated receiver started: %s", self.site().devices)
         return self.site()
@@ -258,7 +261,22 @@ class SimulatedReceiver:
                 ),
             ),
             references={"test_load": str(self.test_load_reference)},
+            corrections=self.corrections(),
             simulation=self.clock.parameters if isinstance(self.clock, CompressedClock) else {},
+        )
+
+    def corrections(self) -> CorrectionSettings:
+        """What the site file says of the simulated effects' two-ports, cables and RFI."""
+        effects = self.physics.config.effects
+        cables = {
+            name: CableSettings(port, None, c.length_m, c.velocity_factor, c.loss_db_per_m_100mhz)
+            for name, (c, port) in effects.cables().items()
+        }
+        return CorrectionSettings(
+            mts_sources=self._two_ports.get("sources") if effects.mts else None,
+            mts_lna=self._two_ports.get("lna") if effects.mts else None,
+            cables=cables,
+            rfi=effects.rfi,
         )
 
     def close(self) -> None:
