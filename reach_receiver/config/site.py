@@ -10,7 +10,8 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
       tec: {via: teensy}              # or {via: serial, port: /dev/ttyUSB0}
       tc08: {library: /opt/picotech/lib/libusbtc08.so}
       spectrometer: {host: 0.0.0.0, port: 4660, period_s: 1.0}   # period_s required
-    calibration: {band_hz: [50.0e+6, 130.0e+6]}   # the engine's band; this is the default
+    calibration: {band_hz: [50.0e+6, 130.0e+6]}   # the engine's band (default); corrections:
+                                  # reach_receiver.config.corrections
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
     thermocouples: {hot: 2}                 # source -> TC-08 port, changes to table 2.2
@@ -44,6 +45,7 @@ from reach_receiver.frontend.layout import (
     SourcePosition,
 )
 
+from .corrections import CALIBRATION_KEYS, CorrectionSettings, corrections_yaml, read_corrections
 from .daemon import DAEMON_KEYS, DaemonSettings, daemon_yaml, read_daemon
 from .fields import REQUIRED, Fields, closest, type_name
 from .monitoring import MONITORING_KEYS, MonitoringSettings, monitoring_yaml, read_monitoring
@@ -96,6 +98,7 @@ class SiteConfig:
     daemon: DaemonSettings = field(default_factory=DaemonSettings)
     monitoring: MonitoringSettings = field(default_factory=MonitoringSettings)
     source: str = "<memory>"
+    corrections: CorrectionSettings = field(default_factory=CorrectionSettings)
 
     def clock(self) -> Clock:
         """The clock the site runs on: a ``reach-sim``'s shared compressed clock, or the wall's."""
@@ -120,8 +123,9 @@ class SiteConfig:
                 for name, settings in vars(self.devices).items()
             },
         }
-        if self.band_hz != DEFAULT_BAND_HZ:
-            document["calibration"] = {"band_hz": list(self.band_hz)}
+        calibration = {"band_hz": list(self.band_hz)} if self.band_hz != DEFAULT_BAND_HZ else {}
+        if calibration or corrections_yaml(self.corrections):
+            document["calibration"] = {**calibration, **corrections_yaml(self.corrections)}
         if self.references:
             document["references"] = dict(self.references)
         if self.simulation:
@@ -188,6 +192,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     name = place.text("name", "unnamed site") or "unnamed site"
     devices = _devices(reader)
     band = _band(reader)
+    corrections = read_corrections(reader.section("calibration", CALIBRATION_KEYS))
     references = reader.section("references", _REFERENCE_KEYS)
     written_references = {k: references.text(k) for k in _REFERENCE_KEYS if references.has(k)}
     simulation = reader.section("simulation", _SIMULATION_KEYS)
@@ -214,6 +219,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         daemon=daemon,
         monitoring=monitoring,
         source=source,
+        corrections=corrections,
     )
 
 
@@ -245,7 +251,7 @@ def _devices(reader: _Reader) -> DeviceSettings | None:
 
 
 def _band(reader: _Reader) -> tuple[float, float] | None:
-    calibration = reader.section("calibration", ("band_hz",))
+    calibration = reader.section("calibration", CALIBRATION_KEYS)
     if not calibration.has("band_hz"):
         return DEFAULT_BAND_HZ
     written = calibration.raw("band_hz")
@@ -316,11 +322,8 @@ def _thermocouples(reader: _Reader) -> dict[str, int]:
     if given is None:
         return ports
     if not isinstance(given, LineDict):
-        reader.report(
-            reader.document.line_of("thermocouples"),
-            "thermocouples",
-            "must map source names to TC-08 ports 1-8",
-        )
+        line = reader.document.line_of("thermocouples")
+        reader.report(line, "thermocouples", "must map source names to TC-08 ports 1-8")
         return ports
     for name, port in given.items():
         if not isinstance(port, int) or isinstance(port, bool) or not 1 <= port <= 8:

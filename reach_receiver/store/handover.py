@@ -15,6 +15,8 @@ A calibration made during a run (the ``calibrate`` step), the run file's engine 
      temperature in every chosen cycle; their temperature is the mean of the cycles'
      (each the mean of its readings during its own source position), with the
      root-sum-square of the cycles' standard errors over their number;
+   * every TC-08 port's mean over the source's cycles (``thermocouples_k``: its
+     cable's temperature, :mod:`reach_receiver.store.corrections`);
    * a source whose S11 is missing or does not cover the band (no extrapolation), or
      whose spectra do not cover the band's channels, is left out with a warning.
 
@@ -110,6 +112,8 @@ class HandOver:
     calibrators: tuple[str, ...]
     warnings: tuple[str, ...] = ()
     temperatures_k: Mapping[str, float] = field(default_factory=dict)
+    thermocouples_k: Mapping[str, Mapping[int, float]] = field(default_factory=dict)
+    corrections: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def channels(self) -> slice:
@@ -137,6 +141,8 @@ class HandOver:
                 "s11": dict(self.s11),
                 "calibrators": list(self.calibrators),
                 "temperatures_k": dict(self.temperatures_k),
+                "thermocouples_k": {k: dict(v) for k, v in self.thermocouples_k.items()},
+                "corrections": dict(self.corrections),
                 "warnings": list(self.warnings),
             }
         )
@@ -153,6 +159,11 @@ class HandOver:
             calibrators=tuple(value["calibrators"]),
             warnings=tuple(value.get("warnings", ())),
             temperatures_k={k: float(v) for k, v in value.get("temperatures_k", {}).items()},
+            thermocouples_k={
+                k: {int(p): float(t) for p, t in v.items()}
+                for k, v in value.get("thermocouples_k", {}).items()
+            },
+            corrections=value.get("corrections", {}),
         )
 
 
@@ -208,6 +219,7 @@ def select(
     used: dict[str, tuple[int, ...]] = {}
     calibrators: list[str] = []
     temperatures: dict[str, float] = {}
+    ports: dict[str, dict[int, float]] = {}
     for source, numbers in chosen.items():
         widths = {groups[n]["source/spectrum"].shape[1] for n in numbers}
         if len(widths) != 1 or min(widths) < channels.stop:
@@ -217,6 +229,11 @@ def select(
             continue
         used[source] = tuple(numbers)
         s11[source] = latest_s11[source]
+        if all("thermocouples" in groups[n] for n in numbers):
+            read = np.array([groups[n]["thermocouples"][()] for n in numbers])
+            n_read = np.isfinite(read).sum(axis=0)
+            total = np.where(np.isfinite(read), read, 0.0).sum(axis=0)
+            ports[source] = {p: float(total[p] / k) for p, k in enumerate(n_read) if k}
         known = ["temperature" in groups[n] for n in numbers]
         if source != ANTENNA and all(known):
             calibrators.append(source)
@@ -231,6 +248,7 @@ def select(
         calibrators=tuple(calibrators),
         warnings=tuple(warnings),
         temperatures_k=temperatures,
+        thermocouples_k=ports,
     )
 
 

@@ -326,11 +326,14 @@ class RunStore:
         timestamp: float,
         temperature_std_k: float = 0.0,
         lst_h: Mapping[str, Sequence[float]] | None = None,
+        thermocouples_k: Mapping[int, float] | None = None,
     ) -> int:
         """Store one Dicke cycle: per position the mean spectrum (n_inputs, n_channels).
 
         ``temperature_std_k`` is the uncertainty of ``temperature_k`` (K); ``lst_h`` the
-        local sidereal time of each spectrum's mid-point, per position.
+        local sidereal time of each spectrum's mid-point, per position;
+        ``thermocouples_k`` every TC-08 port's mean during the source position (K), for
+        the temperatures of the sources' cables (dataset ``thermocouples``, NaN unread).
         """
         for what, value in (("spectra", spectra), ("timestamps", timestamps)):
             _per_position(what, value)
@@ -348,6 +351,10 @@ class RunStore:
             if temperature_k is not None:
                 t = dataset(f, "temperature", float(temperature_k), UNITS_K)
                 t.attrs["std_k"] = float(temperature_std_k)
+            if thermocouples_k:
+                ports = np.full(max(9, max(thermocouples_k) + 1), np.nan)  # TC-08 ports 0-8
+                ports[list(thermocouples_k)] = list(thermocouples_k.values())
+                dataset(f, "thermocouples", ports, UNITS_K)
             for p in DICKE_POSITIONS:
                 g = f.create_group(p)
                 dataset(g, "spectrum", arrays[p], UNITS_POWER)

@@ -9,10 +9,17 @@ the site's (``calibration.band_hz``) unless the step gives one. The solution is 
 with the hand-over it was made from, verified against a benchmark solution if one is
 given (thesis 2.1.3: every parameter's band-averaged value within 5 %), and summarised
 by its distance to the noise floor on the validation source (the antenna when measured).
+
+``mts``, ``cables`` and ``rfi`` (each ``true`` by default) apply the corrections the site
+file's ``calibration`` section describes (:mod:`reach_receiver.store.corrections`: the
+MTS paths de-embedded and embedded, the cable-based sources' temperatures through their
+cables, RFI channels dropped) to the hand-over's data before the solve; ``false`` leaves
+one out. What was done is stored in the solution's hand-over (``corrections``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +37,7 @@ from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
 from reach_receiver.schedule.timing import TimingWalk
 from reach_receiver.store import HandOver, read_run_file
+from reach_receiver.store.corrections import ALL_CORRECTIONS, Chosen, correct
 from reach_receiver.store.handover import ANTENNA, RECEIVER
 
 from ..checks import compare_with_benchmark
@@ -50,6 +58,7 @@ class Calibrate(Step):
     tolerance: float = 0.05
     f_lo_hz: float | None = None
     f_hi_hz: float | None = None
+    corrections: Chosen = ALL_CORRECTIONS
 
 
 @dataclass(frozen=True)
@@ -80,8 +89,10 @@ def benchmark_solution(path: Path) -> Solution:
         return previous
 
 
-def calibrate(run: RunContext, band_hz: tuple[float, float]) -> CalibrationOutcome:
-    """Solve the run so far over ``band_hz``, store the solution with its hand-over."""
+def calibrate(
+    run: RunContext, band_hz: tuple[float, float], chosen: Chosen = ALL_CORRECTIONS
+) -> CalibrationOutcome:
+    """Solve the run so far over ``band_hz``, corrected as ``chosen`` and the site say."""
     view = run.store.engine_view(band_hz)
     handover = view.handover
     if RECEIVER not in handover.s11:
@@ -93,8 +104,14 @@ def calibrate(run: RunContext, band_hz: tuple[float, float]) -> CalibrationOutco
             "calibrate needs at least two calibrators with spectra, S11 and temperatures; "
             f"have {list(handover.calibrators)}" + (f" ({why})" if why else "")
         )
+    site = run.site
+    data, others, report = correct(
+        data, dict(view.others), handover, site.corrections, site.source, chosen
+    )
+    if report:
+        handover = dataclasses.replace(handover, corrections=report)
     solution = solve_radiometric(data)
-    validation = view.others.get(ANTENNA) or data.sources[data.names[0]]
+    validation = others.get(ANTENNA) or data.sources[data.names[0]]
     spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, validation, data.channel_width_hz)
     return CalibrationOutcome(
         solution=solution,
@@ -111,7 +128,7 @@ class CalibrateKind(RunnableKind[Calibrate]):
 
     name = "calibrate"
     step_type = Calibrate
-    keys = ("benchmark", "tolerance", "f_lo_hz", "f_hi_hz")
+    keys = ("benchmark", "tolerance", "f_lo_hz", "f_hi_hz", "mts", "cables", "rfi")
     needs_devices = False
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Calibrate:
@@ -124,12 +141,19 @@ class CalibrateKind(RunnableKind[Calibrate]):
         hi = high if high is not None else (band[1] if band else None)
         if not f.failed and lo is not None and hi is not None and lo >= hi:
             f.report("f_hi_hz", f"must be above f_lo_hz ({lo:g} Hz), not {hi:g}")
+        switches = {}
+        for key in ("mts", "cables", "rfi"):
+            value = f.raw(key, True)
+            if not isinstance(value, bool):
+                f.report(key, f"must be true or false, not {value!r}")
+            switches[key] = value is not False
         return Calibrate(
             where,
             benchmark=ctx.path(f.file, benchmark) if benchmark else None,
             tolerance=f.fraction("tolerance", 0.05),
             f_lo_hz=low,
             f_hi_hz=high,
+            corrections=Chosen(**switches),
         )
 
     def describe(self, step: Calibrate) -> str:
@@ -153,7 +177,7 @@ class CalibrateKind(RunnableKind[Calibrate]):
         lo, hi = run.site.band_hz
         band = (step.f_lo_hz or lo, step.f_hi_hz or hi)
         run.progress.update(f"calibrating {band[0] / 1e6:g}-{band[1] / 1e6:g} MHz", 0, 1, None)
-        outcome = calibrate(run, band)
+        outcome = calibrate(run, band, step.corrections)
         verification: dict[str, object] = {}
         if step.benchmark is not None:
             verdict = compare_with_benchmark(

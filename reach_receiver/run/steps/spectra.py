@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach_receiver.config.fields import Fields
+from reach_receiver.errors import ReceiverError
 from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD
 from reach_receiver.schedule.lst import apparent_lst_h
 from reach_receiver.schedule.parsing import ParseContext
@@ -31,6 +32,7 @@ from ..kind import RunnableKind
 from ..measure import (
     DICKE_POSITIONS,
     DICKE_REFERENCES,
+    DickeCycle,
     integrate_connected,
     source_temperature,
     take_dicke_cycle,
@@ -88,9 +90,21 @@ def dicke_cycle(run: RunContext, source: str, seconds: float, label: str = "") -
             for k, v in cycle.spectra.items()
         },
         timestamp=run.clock.now(),
+        thermocouples_k=port_temperatures(cycle),
     )
     run.flush_temperatures()
     return number
+
+
+def port_temperatures(cycle: DickeCycle) -> dict[int, float]:
+    """Every TC-08 port's mean during the source position (K); unread ports left out."""
+    found = {}
+    for port in range(1, 9):
+        try:
+            found[port] = cycle.temperature_k(port)
+        except (ReceiverError, KeyError):
+            continue
+    return found
 
 
 def dicke_connections(sources: tuple[str, ...]) -> list[tuple[str, str]]:
