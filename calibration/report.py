@@ -30,7 +30,6 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
@@ -323,7 +322,11 @@ def write_report(
     directory.mkdir(parents=True, exist_ok=True)
     pngs: list[Path] = []
     pdf_path = directory / "report.pdf" if pdf else None
-    pages: PdfPages | None = PdfPages(pdf_path) if pdf_path is not None else None
+    pages = None
+    if pdf_path is not None:  # the PDF backend's import costs 0.1-0.2 s: only when asked
+        from matplotlib.backends.backend_pdf import PdfPages
+
+        pages = PdfPages(pdf_path)
     with pages if pages is not None else contextlib.nullcontext():
         for stem, build in figure_builders(inputs, calibrated).items():
             fig = build()

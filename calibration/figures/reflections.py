@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from ..data import CalibrationData, SourceData
-from .style import NEUTRAL, mhz, new_figure, source_styles, styled
+from .style import NEUTRAL, WIDTH_PX, envelope, mhz, new_figure, source_styles, styled
 
 ComplexArray = NDArray[np.complex128]
 
@@ -77,7 +77,7 @@ def reflections(
         smith.plot(gamma.real, gamma.imag, lw=1.1, **style)
         smith.plot(gamma.real[0], gamma.imag[0], "o", color=style["color"], ms=4)
         level = 20 * np.log10(np.maximum(np.abs(gamma), 1e-12))
-        db.plot(x, level, label=name, **style)
+        db.plot(*envelope(x, level, WIDTH_PX // 2), label=name, **style)
     smith.set_title(f"Smith chart ({x[0]:.0f}-{x[-1]:.0f} MHz, ● at {x[0]:.0f} MHz)")
     db.set_xlabel("frequency (MHz)")
     db.set_ylabel(r"$|\Gamma|$ (dB)")

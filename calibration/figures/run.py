@@ -17,7 +17,17 @@ from numpy.typing import NDArray
 
 from ..data import CalibrationData, SourceData
 from ..run_records import TemperatureLog
-from .style import axes_grid, legend_outside, mhz, new_figure, note, source_styles, styled
+from .style import (
+    WIDTH_PX,
+    axes_grid,
+    envelope,
+    legend_outside,
+    mhz,
+    new_figure,
+    note,
+    source_styles,
+    styled,
+)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -51,8 +61,9 @@ def dicke_powers(
     x = mhz(data.freq_hz)
     for name, src in sources.items():
         for ax, (attr, _, _) in zip(axes, _POSITIONS, strict=False):
-            ax.plot(x, getattr(src, attr), lw=0.8, label=name, **styles[name])
-        axes[3].plot(x, src.q, lw=0.8, label=name, **styles[name])
+            ax.plot(*envelope(x, getattr(src, attr), WIDTH_PX // 2), lw=0.8, label=name,
+                    **styles[name])
+        axes[3].plot(*envelope(x, src.q, WIDTH_PX // 2), lw=0.8, label=name, **styles[name])
     for ax, (attr, label, title) in zip(axes, _POSITIONS, strict=False):
         ax.set_ylabel(f"{label} (arbitrary power)")
         ax.set_title(f"{label}: {title}")
@@ -129,7 +140,7 @@ def temperatures(log: TemperatureLog | None, columns: int = 3) -> Figure:
     hours = (log.timestamps_s - log.timestamps_s[0]) / 3600.0
     for k, (ax, channel) in enumerate(zip(axes, log.channels, strict=True)):
         values = log.values_c[:, k]
-        ax.plot(hours, values, color=f"C{k % 10}", lw=0.8)
+        ax.plot(*envelope(hours, values, WIDTH_PX // columns), color=f"C{k % 10}", lw=0.8)
         spread = np.ptp(values) if values.size else 0.0
         ax.set_title(f"{channel}: {np.mean(values):.2f} °C, p-p {spread:.2f} °C", fontsize=9.5)
         if k % columns == 0:

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from ..solution import CalibratedSpectrum
-from .style import NEUTRAL, axes_grid, mhz, new_figure, note, styled
+from .style import NEUTRAL, WIDTH_PX, axes_grid, envelope, mhz, new_figure, note, styled
 
 FloatArray = NDArray[np.float64]
 
@@ -42,29 +42,32 @@ def binned(x: FloatArray, y: FloatArray, bins: int = BINS) -> tuple[FloatArray, 
 
 
 def _residual_panel(
-    ax: Axes, name: str, spectrum: CalibratedSpectrum, reference: FloatArray
+    ax: Axes, name: str, spectrum: CalibratedSpectrum, reference: FloatArray, pixels: int
 ) -> None:
     x = mhz(spectrum.freq_hz)
     residual = spectrum.mean - reference
     meas, cal = spectrum.std_measurement, spectrum.std_calibration
-    ax.plot(x, residual, color="C0", lw=0.5, alpha=0.5, label="residual per channel")
+    ax.plot(*envelope(x, residual, pixels), color="C0", lw=0.5, alpha=0.5,
+            label="residual per channel")
     bx, by = binned(x, residual)
     ax.plot(bx, by, color=NEUTRAL, lw=1.3, label=f"residual, {x.size // bx.size}-channel bins")
-    ax.plot(x, meas, color="C1", lw=1.3, label="radiometer noise ±1σ")
-    ax.plot(x, -meas, color="C1", lw=1.3)
-    ax.plot(x, cal, color="k", ls="--", lw=0.9, label="calibration ±1σ")
-    ax.plot(x, -cal, color="k", ls="--", lw=0.9)
+    for sign in (1, -1):
+        ax.plot(*envelope(x, sign * meas, pixels), color="C1", lw=1.3,
+                label="radiometer noise ±1σ" if sign > 0 else None)
+        ax.plot(*envelope(x, sign * cal, pixels), color="k", ls="--", lw=0.9,
+                label="calibration ±1σ" if sign > 0 else None)
     ratio = rms(residual) / rms(spectrum.std)
     ax.set_title(f"{name}: {rms(residual) * 1e3:.3g} mK RMS = {ratio:.2f} σ", **TITLE)
     limit = 4 * max(float(np.max(meas)), float(np.max(np.abs(by))), 1e-9)
     ax.set_ylim(-limit, limit)
 
 
-def _temperature_panel(ax: Axes, name: str, spectrum: CalibratedSpectrum) -> None:
+def _temperature_panel(ax: Axes, name: str, spectrum: CalibratedSpectrum, pixels: int) -> None:
     x = mhz(spectrum.freq_hz)
+    step = max(1, x.size // (2 * pixels))  # the band is smooth: every step-th channel
     lo, hi = spectrum.mean - spectrum.std, spectrum.mean + spectrum.std
-    ax.fill_between(x, lo, hi, color="0.8", lw=0, label="total ±1σ")
-    ax.plot(x, spectrum.mean, color="C0", lw=0.6)
+    ax.fill_between(x[::step], lo[::step], hi[::step], color="0.8", lw=0, label="total ±1σ")
+    ax.plot(*envelope(x, spectrum.mean, pixels), color="C0", lw=0.6)
     ax.set_title(f"{name}: calibrated T (no reference)", **TITLE)
 
 
@@ -88,13 +91,14 @@ def calibrated_sources(
         note(fig.add_subplot(), "no calibrated source to show")
         return fig
     axes, bottom = axes_grid(fig, n, columns)
+    pixels = WIDTH_PX // columns
     for i, (ax, (name, spectrum)) in enumerate(zip(axes, spectra.items(), strict=True)):
         reference = references.get(name)
         if reference is None:
-            _temperature_panel(ax, name, spectrum)
+            _temperature_panel(ax, name, spectrum, pixels)
             ax.set_ylabel("T (K)")
         else:
-            _residual_panel(ax, name, spectrum, np.asarray(reference, float))
+            _residual_panel(ax, name, spectrum, np.asarray(reference, float), pixels)
             if i % columns == 0:
                 ax.set_ylabel("calibrated − known (K)")
     for ax in bottom:
