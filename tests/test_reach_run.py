@@ -1,6 +1,7 @@
 """``reach-run`` end to end against the simulated receiver: the main job, bad input, faults."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import pytest
 
 from reach_receiver.cli import run_main
 from reach_receiver.clock import ManualClock
+from reach_receiver.run.report import write_run_report
 from reach_receiver.sim.physics import ReceiverPhysics
 from reach_receiver.store import merge_run, read_run_file
 
@@ -57,6 +59,25 @@ def test_main_job_recovers_the_simulators_noise_waves(tmp_path, capsys):
     # Looser than test_receiver_loop's 2.5: here the simulated VNA drifts (0.1 %/h) during
     # the S11 section, an error the posterior does not hold; RMS z of T_sin reached 2.7.
     assert np.all(np.sqrt(np.mean(z**2, axis=1)) < 4.0)
+    assert_the_report_is_the_solutions(run_file.parent / "report", solution)
+
+
+#: The report's figures of a run with a calibration (calibration.report.figure_builders).
+REPORT_FIGURES = {"parameters", "evidence", "sources", "reflections", "dicke", "flags",
+                  "temperatures"}
+
+
+def assert_the_report_is_the_solutions(directory: Path, solution) -> None:
+    """A PNG per figure beside the run file, and a summary whose orders are the solution's."""
+    assert {p.stem for p in directory.glob("*.png")} == REPORT_FIGURES
+    for png in directory.glob("*.png"):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert png.stat().st_size > 5_000, png  # the flags figure of a run without flags: a note
+    rows = dict(
+        re.findall(r"^\| ([^|]+?) \| ([^|]+?) \|$", (directory / "summary.md").read_text(), re.M)
+    )
+    assert rows["best orders (unc, cos, sin, NS, L)"] == ", ".join(map(str, solution.best_orders))
+    assert rows["posterior layout orders"] == ", ".join(map(str, solution.orders))
 
 
 def test_malformed_schedule_fails_before_anything_moves(tmp_path, capsys):
@@ -146,7 +167,8 @@ def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, ca
         "  - observe: {cycles: 3, seconds: 300, test_load_every: 2}\n"
         "  - safe\n"
     )
-    assert run_main([str(schedule), "--sim", "--out", str(tmp_path / "runs"), "-q"]) == 0
+    options = ["--sim", "--out", str(tmp_path / "runs"), "-q", "--no-report"]  # drawn once, above
+    assert run_main([str(schedule), *options]) == 0
     contents = read_run_file(only_run(tmp_path / "runs") / "run.h5")
     calibrated = contents.of_kind("calibrated")
     assert [m.name for m in calibrated] == ["ant_0000", "ant_0001", "ant_0002"]
@@ -160,7 +182,8 @@ def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, ca
 
 def test_a_second_calibration_is_verified_against_the_first(tmp_path, capsys):
     first = tmp_path / "first"
-    assert run_main([str(SCHEDULES / "quick.yaml"), "--sim", "--out", str(first), "-q"]) == 0
+    quiet = ["-q", "--no-report"]  # the report is the main job's test
+    assert run_main([str(SCHEDULES / "quick.yaml"), "--sim", "--out", str(first), *quiet]) == 0
     benchmark = only_run(first) / "run.h5"
     text = (SCHEDULES / "quick.yaml").read_text()
     again = tmp_path / "again.yaml"
@@ -169,5 +192,12 @@ def test_a_second_calibration_is_verified_against_the_first(tmp_path, capsys):
         .replace("  - calibrate: {}", f"  - calibrate: {{benchmark: {benchmark}}}")
     )
     capsys.readouterr()
-    assert run_main([str(again), "--sim", "--seed", "5", "--out", str(tmp_path / "b"), "-q"]) == 0
+    assert run_main([str(again), "--sim", "--seed", "5", "--out", str(tmp_path / "b"), *quiet]) == 0
     assert "check benchmark solution: PASS" in capsys.readouterr().out
+
+
+def test_a_report_that_cannot_be_drawn_is_logged_not_raised(tmp_path, caplog):
+    run_file = tmp_path / "run.h5"
+    run_file.write_bytes(b"not HDF5")  # a run file the engine cannot read
+    assert write_run_report(run_file) is None
+    assert f"the report of {run_file} could not be written" in caplog.text

@@ -15,7 +15,8 @@ A thin command over the run layer (:class:`~reach_receiver.run.session.RunSessio
    state, the run file is closed with the reason, exit 1. A second signal stops at once.
 4. A completed run prints its checks, the solution (orders, noise scale, distance to the
    noise floor) and, with ``--sim``, the actual calibration error against the
-   simulator's truth.
+   simulator's truth; a run that made a calibration gets its report in
+   ``<run dir>/report/`` (:mod:`reach_receiver.run.report`; ``--no-report`` skips it).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_pa
 from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
 from reach_receiver.errors import ReceiverError
 from reach_receiver.run.context import NoProgress, Progress
+from reach_receiver.run.report import write_run_report
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
 from reach_receiver.schedule.compile import ScheduleError
 from reach_receiver.schedule.timing import format_timeline, hms
@@ -94,6 +96,11 @@ def parser() -> argparse.ArgumentParser:
         "at least 1)",
     )
     p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
+    p.add_argument(
+        "--no-report",
+        action="store_true",
+        help="do not draw the calibration's report (figures, summary) into <run dir>/report/",
+    )
     daemon = p.add_argument_group("with reachd running (it owns the hardware)")
     daemon.add_argument("--detach", action="store_true", help="submit, do not follow")
     daemon.add_argument(
@@ -201,6 +208,9 @@ def run_main(argv: Sequence[str] | None = None) -> int:
             print(f"reach-run: the run did not start: {err}", file=sys.stderr)
             return 1
         _print_summary(summary, sim)
+        if summary.calibration is not None and summary.run_file and not args.no_report:
+            report = write_run_report(summary.run_file)
+            print(f"report: {report}" if report else "report: not written (see the log)")
     return 0
 
 
