@@ -136,6 +136,8 @@ def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
         print(f"reachd: cannot start: {err}", file=sys.stderr)
         daemon.close()
         return 1
+    if daemon.page is not None:
+        print(f"reachd: status page {daemon.page.url}", flush=True)
     print(f"reachd: serving {dirs.runtime / 'control.sock'} ({daemon.machine.state})", flush=True)
     try:
         daemon.serve()

@@ -7,6 +7,7 @@
       state_dir: /var/lib/reach      # queue, runs/ ($STATE_DIRECTORY)
       resume: true                   # an interrupted run carries on after a restart
       missed: {policy: late, window_s: 3600}   # a trigger missed while down
+      status_port: 8470              # the status page on 127.0.0.1 only; 0 = any free port
       timers:
         - {name: night, schedule: schedules/observe.yaml, at_lst_h: 22.0}
         - {name: calibration, schedule: schedules/calibrate.yaml, at_utc: "12:00"}
@@ -19,7 +20,9 @@ with a log line; either way a missed trigger runs at most once.
 
 Without the section, ``runtime_dir`` and ``state_dir`` come from systemd's
 ``$RUNTIME_DIRECTORY`` and ``$STATE_DIRECTORY``, else ``/run/reach`` and
-``/var/lib/reach``; nothing resumes, nothing is timed.
+``/var/lib/reach``; nothing resumes, nothing is timed. Without ``status_port`` there is
+no status page (:mod:`reach_receiver.daemon.status_page`); its host is always
+``127.0.0.1`` and cannot be set.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from .yaml_lines import LineDict, LineList, Problem
 
 DEFAULT_RUNTIME_DIR = Path("/run/reach")
 DEFAULT_STATE_DIR = Path("/var/lib/reach")
-DAEMON_KEYS = ("runtime_dir", "state_dir", "resume", "missed", "timers")
+DAEMON_KEYS = ("runtime_dir", "state_dir", "resume", "missed", "timers", "status_port")
 TIMER_KEYS = ("name", "schedule", "at_lst_h", "at_utc")
 _UTC = re.compile(r"^([01]\d|2[0-3]):([0-5]\d)$")
 
@@ -69,6 +72,7 @@ class DaemonSettings:
     missed_policy: Literal["late", "skip"] = "late"
     missed_window_s: float = 3600.0
     timers: tuple[TimerSettings, ...] = field(default=())
+    status_port: int | None = None
 
     def runtime_directory(self, environ: Mapping[str, str] = os.environ) -> Path:
         """The runtime directory: the site's, else systemd's, else ``/run/reach``."""
@@ -116,6 +120,13 @@ def read_daemon(section: Fields, site_file: str, problems: list[Problem]) -> Dae
             continue
         timer = Fields(item, file=site_file, key=key, allowed=TIMER_KEYS, problems=problems)
         timers.append(_timer(timer, base))
+    status_port = None
+    if section.has("status_port"):
+        port = section.raw("status_port")
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+            section.report("status_port", f"must be a port number in [0, 65535], not {port!r}")
+        else:
+            status_port = port
     names = [t.name for t in timers]
     for name in {n for n in names if names.count(n) > 1}:
         section.report("timers", f"two timers are named {name!r}")
@@ -126,6 +137,7 @@ def read_daemon(section: Fields, site_file: str, problems: list[Problem]) -> Dae
         missed_policy="skip" if policy == "skip" else "late",
         missed_window_s=window,
         timers=tuple(timers),
+        status_port=status_port,
     )
 
 
@@ -153,6 +165,8 @@ def daemon_yaml(daemon: DaemonSettings) -> dict[str, Any]:
     if daemon.state_dir is not None:
         out["state_dir"] = str(daemon.state_dir)
     out["missed"] = {"policy": daemon.missed_policy, "window_s": daemon.missed_window_s}
+    if daemon.status_port is not None:
+        out["status_port"] = daemon.status_port
     if daemon.timers:
         out["timers"] = [
             {

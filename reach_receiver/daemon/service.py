@@ -56,6 +56,7 @@ from .notify import Notifier, Watchdog
 from .protocol import ControlError, reply
 from .recovery import recover_run, recover_runs
 from .states import TRANSITIONS, StateMachine
+from .status_page import StatusPage
 from .timers import Timers, Trigger
 
 log = logging.getLogger(__name__)
@@ -142,6 +143,10 @@ class Daemon:
             site, clock, directories.state, directories.runs,
             daemon_state=lambda: states.index(self.machine.state),
         )
+        self.page: StatusPage | None = None
+        if site.daemon.status_port is not None:  # read-only, 127.0.0.1 only (.status_page)
+            self.page = StatusPage(site.daemon.status_port, self._status_reply, directories.runs,
+                                   lambda: self.monitor.database, clock.now)
         self.paused = False
         self.current: Job | None = None
         self.session: RunSession | None = None
@@ -172,6 +177,8 @@ class Daemon:
         self._check_timers()
         self.monitor.start()
         self.server.start()
+        if self.page is not None:
+            self.page.start()
         if self.machine.state == "starting":
             self.machine.go("idle", "started: front-end safe, socket open")
         self.notifier.ready(self.status_line())
@@ -197,8 +204,10 @@ class Daemon:
         self._halt.set()
 
     def close(self) -> None:
-        """Close the socket, release the hardware, say goodbye to systemd."""
+        """Close the socket and the page, release the hardware, say goodbye to systemd."""
         self.server.close()
+        if self.page is not None:
+            self.page.close()
         self.monitor.close()
         self.lock.release()
         if self.machine.can("stopped"):

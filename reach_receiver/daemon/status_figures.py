@@ -1,0 +1,231 @@
+"""The status page's figures, from what the daemon has stored (read-only).
+
+Each builder returns a :class:`matplotlib.figure.Figure` in the engine's style
+(:mod:`calibration.figures.style`, Agg, no pyplot) and says so in the figure when it has
+nothing to show yet:
+
+* :func:`dicke_spectra`: the latest Dicke cycle of the newest run that has one (a running
+  run's parts count: :func:`~reach_receiver.store.read_run_file` reads them unmerged),
+  its three positions' spectra (the receiver's input, in dB of the spectrometer's
+  arbitrary unit) and their ``Q`` (thesis eq. 3.9) over the run's band;
+* :func:`s11s`: the latest S11 of every target in the newest run with S11s, on a Smith
+  chart and in dB (the chart of :func:`calibration.figures.reflections`);
+* :func:`temperatures_last_day`: every temperature series of the metrics database
+  (:meth:`~reach_receiver.monitor.database.MetricsDatabase.series`) over the last day,
+  drawn by :func:`calibration.figures.temperatures`;
+* :func:`current_solution`: the newest run's latest ``/calibration/solution`` drawn by
+  :func:`calibration.figures.noise_wave_parameters`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from calibration.figures import noise_wave_parameters, temperatures
+from calibration.figures.reflections import smith_grid
+from calibration.figures.style import (
+    NEUTRAL,
+    WIDTH_PX,
+    axes_grid,
+    envelope,
+    mhz,
+    new_figure,
+    note,
+    source_styles,
+    styled,
+)
+from calibration.run_records import TemperatureLog
+from reach_receiver.errors import ReceiverError
+from reach_receiver.monitor.database import MetricsDatabase
+from reach_receiver.monitor.readings import parse_key
+from reach_receiver.store import RUN_FILE, Measurement, RunContents, read_run_file
+
+__all__ = [
+    "FIGURES",
+    "current_solution",
+    "dicke_spectra",
+    "runs_newest_first",
+    "s11s",
+    "temperatures_last_day",
+]
+
+#: Seconds of metrics the temperatures figure shows.
+DAY_S = 86400.0
+#: The temperature series: the metrics whose unit is degrees Celsius, but not setpoints.
+TEMPERATURE_UNIT = "degC"
+#: Runs searched, newest first, for a figure's data.
+RUNS_SEARCHED = 20
+_POSITIONS = (("source", "source"), ("load", "reference load"), ("ns", "noise source"))
+
+
+def runs_newest_first(runs: Path) -> Iterator[RunContents]:
+    """The runs under ``runs`` (closed or still running), newest first; unreadable skipped."""
+    directories = sorted((p for p in runs.glob("*") if p.is_dir()), reverse=True)
+    for directory in directories[:RUNS_SEARCHED]:
+        if not (directory / RUN_FILE).exists() and not (directory / "parts").is_dir():
+            continue
+        try:
+            yield read_run_file(directory / RUN_FILE if (directory / RUN_FILE).exists()
+                                else directory)
+        except (ReceiverError, OSError, ValueError, KeyError):
+            continue
+
+
+def _newest_with(runs: Path, kind: str) -> tuple[RunContents, list[Measurement]] | None:
+    """The newest run holding measurements of ``kind``, and those measurements."""
+    for contents in runs_newest_first(runs):
+        found = contents.of_kind(kind)
+        if found:
+            return contents, found
+    return None
+
+
+def _stamp(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(t))
+
+
+def _empty(text: str, height_in: float = 2.4) -> Figure:
+    fig = new_figure(height_in)
+    note(fig.add_subplot(), text)
+    return fig
+
+
+@styled
+def dicke_spectra(runs: Path) -> Figure:
+    """The latest Dicke cycle's three spectra (dB) and ``Q`` against frequency."""
+    newest = _newest_with(runs, "dicke")
+    if newest is None:
+        return _empty("no Dicke cycle recorded yet")
+    contents, cycles = newest
+    cycle = cycles[-1]
+    arrays = contents.read(cycle)
+    n = arrays["source/spectrum"].shape[-1]
+    freq = np.arange(n) * contents.channel_width_hz
+    band = (freq >= contents.band_hz[0]) & (freq <= contents.band_hz[1])
+    if not band.any():
+        band[:] = True
+    power = {p: np.asarray(arrays[f"{p}/spectrum"], float)[0, band] for p, _ in _POSITIONS}
+    x = mhz(freq[band])
+    fig = new_figure(5.6)
+    axes, bottom = axes_grid(fig, 4, 2)
+    for ax, (position, label) in zip(axes, _POSITIONS, strict=False):
+        level = 10 * np.log10(np.maximum(power[position], 1e-30))
+        ax.plot(*envelope(x, level, WIDTH_PX // 2), color=NEUTRAL, lw=0.8)
+        ax.set_title(f"{position}: switch on the {label}")
+        ax.set_ylabel("power (dB, arbitrary)")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = (power["source"] - power["load"]) / (power["ns"] - power["load"])
+    axes[3].plot(*envelope(x, q, WIDTH_PX // 2), color="C0", lw=0.8)
+    axes[3].set_title("Q = (source − load) / (noise source − load)")
+    axes[3].set_ylabel("Q")
+    for ax in bottom:
+        ax.set_xlabel("frequency (MHz)")
+    fig.suptitle(
+        f"Latest Dicke cycle: {cycle.name}, {_stamp(cycle.timestamp)} (run {contents.name})",
+        fontweight="bold",
+    )
+    return fig
+
+
+@styled
+def s11s(runs: Path) -> Figure:
+    """The latest S11 of each target of the newest run with S11s: Smith chart and dB."""
+    newest = _newest_with(runs, "s11")
+    if newest is None:
+        return _empty("no S11 measured yet")
+    contents, found = newest
+    latest = {m.name: m for m in found}  # in order: the last of each name wins
+    styles = source_styles(latest)
+    fig = new_figure(5.0)
+    smith, db = fig.subplots(1, 2, width_ratios=(1, 1.25))
+    smith_grid(smith)
+    for name, measurement in latest.items():
+        arrays = contents.read(measurement)
+        gamma = np.asarray(arrays["s11"], dtype=complex)
+        x = mhz(np.asarray(arrays["frequencies"], dtype=float))
+        smith.plot(gamma.real, gamma.imag, lw=1.0, **styles[name])
+        level = 20 * np.log10(np.maximum(np.abs(gamma), 1e-12))
+        db.plot(*envelope(x, level, WIDTH_PX // 2), label=name, **styles[name])
+    db.set_xlabel("frequency (MHz)")
+    db.set_ylabel(r"$|\Gamma|$ (dB)")
+    smith.set_title("Smith chart")
+    db.set_title("reflection magnitude")
+    fig.legend(loc="outside right center")
+    last = max(m.timestamp for m in latest.values())
+    fig.suptitle(f"Latest S11s: run {contents.name}, to {_stamp(last)}", fontweight="bold")
+    return fig
+
+
+def _label(key: str) -> str:
+    """``cold junction``, ``teensy 0x18``, ``tec``: what a person calls the sensor."""
+    metric, labels = parse_key(key)
+    if "component" in labels:
+        return labels["component"]
+    short = metric.removeprefix("reach_").removesuffix("_celsius").replace("_temperature", "")
+    return " ".join([short, *labels.values()])
+
+
+def temperature_log(database: MetricsDatabase, now: float, span_s: float = DAY_S) -> TemperatureLog:
+    """Every temperature series since ``now - span_s`` on one time axis.
+
+    The devices of one sample are read at slightly different times, so the series are
+    interpolated onto the times of the one with the most readings (a reading that is NaN,
+    a flagged thermocouple, stays a gap).
+    """
+    known = database.keys()
+    keys = [
+        k for k in known
+        if database.unit(k) == TEMPERATURE_UNIT and "setpoint" not in parse_key(k)[0]
+    ]
+    series = {k: database.series(k, now - span_s, now) for k in keys}
+    series = {k: points for k, points in series.items() if points}
+    if not series:
+        return TemperatureLog(np.zeros(0), np.zeros((0, 0)), ())
+    times = np.array([p.t for p in max(series.values(), key=len)], dtype=float)
+    columns = [
+        np.interp(times, [p.t for p in points], [p.value for p in points])
+        for points in series.values()
+    ]
+    return TemperatureLog(times, np.stack(columns, axis=1), tuple(_label(k) for k in series))
+
+
+def temperatures_last_day(database: MetricsDatabase | None, now: float) -> Figure:
+    """The metrics database's temperatures over the last day (one panel per series)."""
+    if database is None:
+        return styled(_empty)("the metrics database is not open")
+    log = temperature_log(database, now)
+    if log.timestamps_s.size == 0:
+        return styled(_empty)("no temperature in the metrics database over the last day")
+    fig = temperatures(log)
+    hours = (log.timestamps_s[-1] - log.timestamps_s[0]) / 3600.0
+    fig.suptitle(
+        f"Temperatures over the last day (metrics database, {hours:.1f} h of readings, "
+        f"to {_stamp(float(log.timestamps_s[-1]))})",
+        fontweight="bold",
+    )
+    return fig
+
+
+def current_solution(runs: Path) -> Figure:
+    """The noise-wave parameters of the newest run's latest solution."""
+    newest = _newest_with(runs, "solution")
+    solution = newest[0].solution() if newest is not None else None
+    if newest is None or solution is None:
+        return styled(_empty)("no calibration solution yet")
+    fig = noise_wave_parameters(solution)
+    fig.suptitle(f"{fig.get_suptitle()}: run {newest[0].name}", fontweight="bold")
+    return fig
+
+
+#: The page's figures by name, each built from the runs directory and the database.
+FIGURES: dict[str, Callable[[Path, MetricsDatabase | None, float], Figure]] = {
+    "spectra": lambda runs, db, now: dicke_spectra(runs),
+    "s11": lambda runs, db, now: s11s(runs),
+    "temperatures": lambda runs, db, now: temperatures_last_day(db, now),
+    "solution": lambda runs, db, now: current_solution(runs),
+}
