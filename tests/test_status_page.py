@@ -167,3 +167,7 @@ def test_a_bad_status_port_is_reported_at_its_line(tmp_path):
         load_site(site)
     site.write_text(text + "daemon:\n  runtime_dir: /tmp\n")
     assert load_site(site).daemon.status_port is None  # no page unless asked
+    site.write_text(text + "daemon:\n  status_port: 8470\n")
+    again = tmp_path / "again.yaml"
+    again.write_text(load_site(site).to_yaml())  # as reachd --site-out writes it back
+    assert load_site(again).daemon.status_port == 8470
