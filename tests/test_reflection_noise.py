@@ -16,7 +16,7 @@ WIDTH = 8 * ITPM_CHANNEL_WIDTH_HZ  # 820 channels
 VNA_SIGMA = 1e-3
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1])
 def test_first_order_variance_matches_monte_carlo(seed):
     """var_T from the derivatives equals the spread of T under drawn reflection errors."""
     run = simulate_run(SimulationConfig(channel_width_hz=WIDTH), rng=seed)

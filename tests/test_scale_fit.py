@@ -39,7 +39,7 @@ def test_each_parameter_gets_the_scale_of_its_own_structure(big, small, seed):
     """Fitted at the truth's own linearisation, the scales follow each structure's size."""
     rng = np.random.default_rng(seed)
     config = SimulationConfig(
-        channel_width_hz=16 * ITPM_CHANNEL_WIDTH_HZ, truth_coefficients=_truth(big, small, rng)
+        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, truth_coefficients=_truth(big, small, rng)
     )
     run = simulate_run(config, rng=seed)
     data, orders, prior = run.data, (4, 4, 4, 4, 4), ShrinkagePrior(per_parameter=True)
@@ -55,11 +55,10 @@ def test_each_parameter_gets_the_scale_of_its_own_structure(big, small, seed):
     assert tau[big] > 3.0  # tens of K of structure against about 1 K elsewhere
 
 
-@pytest.mark.parametrize("seed", [3, 4])
-def test_the_solver_takes_the_per_parameter_prior(seed):
+def test_the_solver_takes_the_per_parameter_prior():
     """The option reaches the solve: a solution, averaged, with finite evidence."""
-    config = SimulationConfig(channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ)
-    data = simulate_run(config, rng=seed).data
+    config = SimulationConfig(channel_width_hz=64 * ITPM_CHANNEL_WIDTH_HZ)
+    data = simulate_run(config, rng=3).data
     prior = RadiometricPrior(coefficients=ShrinkagePrior(per_parameter=True))
     solution = solve_radiometric(data, OrderChoice(max_orders=(5, 5, 5, 5, 5)), prior)
     assert np.isfinite(solution.posterior.log_evidence)
