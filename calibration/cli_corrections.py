@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from .consistency import DEFAULT_ALPHA, check_consistency, exclude_inconsistent
 from .data import CalibrationData
-from .errors import CalibrationError, InvalidDataError
+from .errors import CalibrationError
 from .measurement_uncertainty import check_noise_source
 from .noise_waves import INDEX
 from .preparation import excision_flags, smooth_reflection, smoothing_width_hz
@@ -123,14 +123,7 @@ def add_correction_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _keep(data: CalibrationData, keep: BoolArray, what: str) -> CalibrationData:
-    if np.count_nonzero(keep) < 2:
-        raise InvalidDataError(f"{what} leaves fewer than 2 channels")
-    return replace(
-        data,
-        freq_hz=data.freq_hz[keep],
-        gamma_rec=data.gamma_rec[keep],
-        sources={n: s.select(keep) for n, s in data.sources.items()},
-    )
+    return data.select(keep, what)
 
 
 def _rfi_flags(data: CalibrationData) -> tuple[BoolArray, dict[str, int]]:

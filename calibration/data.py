@@ -275,8 +275,12 @@ class CalibrationData:
     def band(self, f_lo_hz: float, f_hi_hz: float) -> CalibrationData:
         """The same run restricted to ``f_lo_hz <= nu <= f_hi_hz``."""
         mask = (self.freq_hz >= f_lo_hz) & (self.freq_hz <= f_hi_hz)
+        return self.select(mask, f"the band {f_lo_hz}-{f_hi_hz} Hz")
+
+    def select(self, mask: NDArray[np.bool_], what: str = "the selection") -> CalibrationData:
+        """The same run on the channels where ``mask`` is true (at least two)."""
         if np.count_nonzero(mask) < 2:
-            raise InvalidDataError(f"fewer than 2 channels in {f_lo_hz}-{f_hi_hz} Hz")
+            raise InvalidDataError(f"{what} leaves fewer than 2 channels")
         return replace(
             self,
             freq_hz=self.freq_hz[mask],

@@ -39,6 +39,7 @@ from calibration.figures.style import (
     source_styles,
     styled,
 )
+from calibration.noise_waves import q_from_powers
 from calibration.run_records import TemperatureLog
 from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor.database import MetricsDatabase
@@ -119,7 +120,7 @@ def dicke_spectra(runs: Path) -> Figure:
         ax.set_title(f"{position}: switch on the {label}")
         ax.set_ylabel("power (dB, arbitrary)")
     with np.errstate(divide="ignore", invalid="ignore"):
-        q = (power["source"] - power["load"]) / (power["ns"] - power["load"])
+        q = q_from_powers(power["source"], power["load"], power["ns"])
     axes[3].plot(*envelope(x, q, WIDTH_PX // 2), color="C0", lw=0.8)
     axes[3].set_title("Q = (source − load) / (noise source − load)")
     axes[3].set_ylabel("Q")
