@@ -120,7 +120,7 @@ def test_jobs_queue_run_and_can_be_cancelled_and_aborted(reachd, tmp_path, capsy
         assert queued == [2, 3]  # the second submission queues behind the first
         assert client.request("cancel", job=3)["job"]["state"] == "cancelled"
         end = [m for m in client.follow(1)][-1]["event"]
-        assert end["state"] == "completed"
+        assert end["state"] == "completed", end  # its error, if it failed
         assert read_run_file(Path(end["run"]) / "run.h5").status == "completed"
         wait_for(client, 2, "running", "completed")
         client.request("abort")  # job 2 stops now, the front-end goes safe

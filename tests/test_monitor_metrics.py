@@ -165,3 +165,31 @@ def test_health_is_readable_at_a_glance():
     assert "[error]" in tc3
     assert "(300 s old)" in tc3
     assert format_health({}, now) == ["health: no readings (the daemon has no monitor)"]
+
+
+def test_readings_within_one_second_are_two_rows(tmp_path):
+    """A late sample beside the next punctual one (0.3 s apart): neither replaces the other."""
+    db = MetricsDatabase(tmp_path / "m.sqlite")
+    t0 = 1.7e9 + 59.6
+    db.write([Reading(KEY, 1.0, "degC", t0)])
+    db.write([Reading(KEY, 2.0, "degC", t0 + 0.3)])
+    points = db.series(KEY, t0 - 1)
+    assert [(p.t, p.value) for p in points] == [(pytest.approx(t0), 1.0),
+                                                (pytest.approx(t0 + 0.3), 2.0)]
+    assert db.series(KEY, t0 + 0.1) == points[1:]  # bounds to the millisecond
+    db.close()
+
+
+def test_a_file_with_whole_second_times_is_converted_when_opened(tmp_path):
+    import sqlite3
+
+    path = tmp_path / "old.sqlite"
+    db = MetricsDatabase(path)
+    db.write([Reading(KEY, 3.5, "degC", 1.7e9)])
+    db.close()
+    with sqlite3.connect(path) as old:  # as the first layout wrote it
+        old.execute("UPDATE minute SET t = t / 1000")
+        old.execute("PRAGMA user_version = 0")
+    db = MetricsDatabase(path)
+    assert [(p.t, p.value) for p in db.series(KEY, 0)] == [(1.7e9, 3.5)]
+    db.close()

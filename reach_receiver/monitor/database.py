@@ -4,17 +4,23 @@ Layout (``WITHOUT ROWID`` tables keyed by series and time, so one series over a 
 range is one range scan)::
 
     series  (id, key, metric, unit)              one row per series key
-    minute  (series, t, milli, status)           every reading: t in whole seconds,
+    minute  (series, t, milli, status)           every reading: t in milliseconds,
                                                  the value in thousandths (NULL for NaN),
                                                  the status's index in readings.STATUSES
     quarter (series, t, mean_milli, min_milli, max_milli, n, status)
-                                                 15-minute buckets of the minute data:
+                                                 15-minute buckets of the minute data
+                                                 (t in whole seconds, the bucket's start):
                                                  mean, extremes, count, worst status
     meta    (key, value)                         the down-sampling watermark
 
 Values are stored as integers of thousandths: exact to 1e-3 of their unit (1 mK,
 1 byte in 1000), and SQLite stores small integers in one to three bytes, which keeps a
-month of minute data of the simulated receiver's ~60 series near 40 MB.
+month of minute data of the simulated receiver's ~60 series near 40 MB. Times of the
+minute data are kept to the millisecond, not the second: two readings of one series
+taken within a second of each other (a late sample beside the next punctual one, a
+run's last safe point beside the first idle sample) are two rows, and neither replaces
+the other. Files written with whole-second times (``user_version`` 0) are converted
+when opened.
 
 Durability: WAL with ``synchronous=FULL``; every batch of readings is one transaction,
 so a ``kill -9`` or a power cut loses at most the batch being written, and the file is
@@ -51,6 +57,9 @@ CREATE TABLE IF NOT EXISTS quarter (
     PRIMARY KEY (series, t)) WITHOUT ROWID;
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value REAL);
 """
+#: ``PRAGMA user_version`` of the layout above (0: minute times in whole seconds).
+SCHEMA_VERSION = 1
+MS = 1000
 
 
 @dataclass(frozen=True)
@@ -83,7 +92,20 @@ class MetricsDatabase:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.executescript(_SCHEMA)
+            self._upgrade()
         self._ids: dict[str, int] = dict(self._db.execute("SELECT key, id FROM series"))
+
+    def _upgrade(self) -> None:
+        version = int(self._db.execute("PRAGMA user_version").fetchone()[0])
+        if version == SCHEMA_VERSION:
+            return
+        if version != 0:
+            raise ValueError(f"{self.path}: metrics layout {version}, this version knows "
+                             f"{SCHEMA_VERSION}")
+        self._db.execute("BEGIN IMMEDIATE")
+        self._db.execute(f"UPDATE minute SET t = t * {MS}")
+        self._db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+        self._db.execute("COMMIT")
 
     def close(self) -> None:
         """Checkpoint and close the file."""
@@ -108,7 +130,7 @@ class MetricsDatabase:
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 rows = [
-                    (self._series_id(r), round(r.timestamp), _milli(r.value),
+                    (self._series_id(r), round(r.timestamp * MS), _milli(r.value),
                      STATUSES.index(r.status))
                     for r in readings
                 ]
@@ -139,17 +161,18 @@ class MetricsDatabase:
             for series_id in self._ids.values():
                 cursor = self._db.execute(
                     "INSERT OR REPLACE INTO quarter "
-                    "SELECT series, t - t % ?, round(avg(milli)), min(milli), max(milli), "
-                    "count(milli), max(status) FROM minute "
-                    "WHERE series = ? AND t >= ? AND t < ? GROUP BY t - t % ?",
-                    (QUARTER_S, series_id, start, end, QUARTER_S),
+                    "SELECT series, t / ? - t / ? % ?, round(avg(milli)), min(milli), "
+                    "max(milli), count(milli), max(status) FROM minute "
+                    "WHERE series = ? AND t >= ? AND t < ? GROUP BY t / ? - t / ? % ?",
+                    (MS, MS, QUARTER_S, series_id, start * MS, end * MS, MS, MS, QUARTER_S),
                 )
                 written += max(cursor.rowcount, 0)
             minute_cut = int(now - self.minute_days * DAY_S)
             quarter_cut = int(now - self.quarter_days * DAY_S)
             for series_id in self._ids.values():
                 self._db.execute(
-                    "DELETE FROM minute WHERE series = ? AND t < ?", (series_id, minute_cut)
+                    "DELETE FROM minute WHERE series = ? AND t < ?",
+                    (series_id, minute_cut * MS),
                 )
                 self._db.execute(
                     "DELETE FROM quarter WHERE series = ? AND t < ?", (series_id, quarter_cut)
@@ -162,7 +185,7 @@ class MetricsDatabase:
 
     def _first_minute(self) -> int | None:
         row = self._db.execute("SELECT min(t) FROM minute").fetchone()
-        return None if row is None or row[0] is None else int(row[0])
+        return None if row is None or row[0] is None else int(row[0]) // MS
 
     # ----------------------------------------------------------------- queries
     def keys(self, name: str | None = None) -> list[str]:
@@ -195,12 +218,12 @@ class MetricsDatabase:
             series_id = self._ids.get(key)
             if series_id is None:
                 return []
-            high = 2**62 if math.isinf(until) else int(until)
+            high = 2**40 if math.isinf(until) else int(until)  # 2**40 s: beyond any run
             first = self._db.execute(
                 "SELECT min(t) FROM minute WHERE series = ?", (series_id,)
             ).fetchone()[0]
             points: list[Point] = []
-            cut = high if first is None else min(int(first), high)
+            cut = high if first is None else min(int(first) // MS, high)
             if since < cut:
                 rows = self._db.execute(
                     "SELECT t, mean_milli, status FROM quarter WHERE series = ? AND t >= ? "
@@ -210,9 +233,11 @@ class MetricsDatabase:
                 points += [_point(t, m, s, QUARTER_S) for t, m, s in rows]
             rows = self._db.execute(
                 "SELECT t, milli, status FROM minute WHERE series = ? AND t >= ? AND t <= ? "
-                "ORDER BY t", (series_id, max(math.ceil(since), cut if points else 0), high),
+                "ORDER BY t",
+                (series_id, max(math.ceil(since * MS), (cut if points else 0) * MS),
+                 high * MS if math.isinf(until) else math.floor(until * MS)),
             ).fetchall()
-        return points + [_point(t, m, s, 60) for t, m, s in rows]
+        return points + [_point(t / MS, m, s, 60) for t, m, s in rows]
 
     def quarter_means(self, key: str) -> list[tuple[int, float, int]]:
         """Every 15-minute bucket of a series: (start, mean, count)."""
@@ -231,7 +256,7 @@ class MetricsDatabase:
             return int(self._db.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
 
 
-def _point(t: int, milli: int | None, status: int, resolution: int) -> Point:
+def _point(t: float, milli: int | None, status: int, resolution: int) -> Point:
     value = math.nan if milli is None else milli / 1000.0
     return Point(float(t), value, STATUSES[int(status)], resolution)
 

@@ -69,16 +69,20 @@ class Tc08StandIn:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._open: set[int] = set()
+        # open_circuit (a test's thread) and the updating thread both write the file:
+        # one at a time, or one's replace finds the other's temporary file gone.
+        self._writing = threading.Lock()
         self.write()
 
     def write(self) -> None:
         """Rewrite the values file atomically with the temperatures now."""
-        values = list(self._temperatures_c(self._clock.now()))
-        for channel in self._open:
-            values[channel] = math.nan
-        tmp = self.values.with_name(self.values.name + ".tmp")
-        tmp.write_text(" ".join(f"{v:.4f}" for v in values) + "\n")
-        os.replace(tmp, self.values)
+        with self._writing:
+            values = list(self._temperatures_c(self._clock.now()))
+            for channel in self._open:
+                values[channel] = math.nan
+            tmp = self.values.with_name(self.values.name + ".tmp")
+            tmp.write_text(" ".join(f"{v:.4f}" for v in values) + "\n")
+            os.replace(tmp, self.values)
 
     def open_circuit(self, channel: int, is_open: bool = True) -> None:
         """A broken thermocouple: ``channel`` reads NaN (the driver flags it) until closed."""
@@ -96,7 +100,7 @@ class Tc08StandIn:
     def _run(self) -> None:
         while not self._stop.is_set():
             self.write()
-            self._clock.sleep(self._update_s)
+            self._clock.wait(self._stop, self._update_s)
 
     def close(self) -> None:
         """Stop updating (the files stay for inspection until their directory goes)."""
