@@ -123,6 +123,6 @@ def test_the_run_file_holds_the_readings_taken_during_the_run(day):
     assert any(k.startswith("reach_tc08_temperature_celsius") for k in present)  # its log
     assert any(k.startswith("reach_rail_on") for k in present)  # read at safe points
     assert any(k.startswith("reach_teensy_temperature_celsius") for k in present)
-    stored = database.series("reach_disk_free_bytes", round(times.min()), round(times.max()))
+    stored = database.series("reach_disk_free_bytes", times.min(), times.max())
     in_file = times[np.array([keys[i] == "reach_disk_free_bytes" for i in series])]
     assert len(in_file) == len(stored) > 0

@@ -234,8 +234,9 @@ class MetricsDatabase:
             rows = self._db.execute(
                 "SELECT t, milli, status FROM minute WHERE series = ? AND t >= ? AND t <= ? "
                 "ORDER BY t",
-                (series_id, max(math.ceil(since * MS), (cut if points else 0) * MS),
-                 high * MS if math.isinf(until) else math.floor(until * MS)),
+                # Rounded as the stored times are: a reading at ``since`` is in.
+                (series_id, max(round(since * MS), (cut if points else 0) * MS),
+                 high * MS if math.isinf(until) else round(until * MS)),
             ).fetchall()
         return points + [_point(t / MS, m, s, 60) for t, m, s in rows]
 
