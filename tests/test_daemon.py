@@ -171,9 +171,9 @@ def test_reach_run_follows_detaches_and_attaches_again(reachd, tmp_path):
         assert time.monotonic() < deadline, lines
         lines.append(follower.stderr.readline())
     follower.send_signal(signal.SIGINT)  # detach: the run goes on
-    out, _ = follower.communicate(timeout=30)
+    out, err = follower.communicate(timeout=30)
     assert follower.returncode == 0
-    assert "detached from job 1" in out
+    assert "detached from job 1" in out, (lines, out, err)
     with reachd.client() as client:
         assert wait_for(client, 1, "running", "completed")["state"] in ("running", "completed")
     again = python("run_main", "--site", str(reachd.site), "--attach", "1")

@@ -9,7 +9,9 @@ outcome (0 completed, 1 otherwise). Ctrl-C detaches: the run goes on in the daem
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 from typing import Any
 
 from reach_receiver.daemon.client import DaemonClient
@@ -38,9 +40,17 @@ def submit(client: DaemonClient, schedule: Schedule, path: str, detach: bool) ->
 
 
 def follow(client: DaemonClient, job: int | None) -> int:
-    """Print a job's events until it ends (exit 0 if it completed); Ctrl-C detaches."""
+    """Print a job's events until it ends (exit 0 if it completed); Ctrl-C detaches.
+
+    Ctrl-C is Python's KeyboardInterrupt, set here explicitly: Python installs it only
+    when SIGINT was not ignored at start, and a parent (a non-interactive shell's
+    background job, a test runner's worker) may have left it ignored. A local run
+    installs its own handlers the same way (``cli/run.py``).
+    """
     state = "unknown"
     which = job
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         for message in client.follow(job):
             event = message["event"]
