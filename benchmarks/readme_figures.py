@@ -52,7 +52,10 @@ def main() -> None:
     solution = solve_radiometric(data)
     sources = {**data.sources, "ant": run.validation}
     spectra = {
-        name: solution.calibrate(data.freq_hz, data.gamma_rec, src, data.channel_width_hz)
+        name: solution.calibrate(
+            data.freq_hz, data.gamma_rec, src,
+            data.channel_width_hz, data.gamma_rec_std,
+        )
         for name, src in sources.items()
     }
     references = {

@@ -154,7 +154,10 @@ def main(directory: Path) -> None:
         cr = noise_floor(data, src, solutions["ours(ev)"].parameters).rms
         theirs = et.published_calibrated_temperature(published, src.p_source, src.gamma)
         ours = {
-            k: s.calibrate(data.freq_hz, data.gamma_rec, src, data.channel_width_hz).mean
+            k: s.calibrate(
+                data.freq_hz, data.gamma_rec, src,
+                data.channel_width_hz, data.gamma_rec_std,
+            ).mean
             for k, s in solutions.items()
         }
         allowance = S_MATCHED_K * rms(x_l)

@@ -103,7 +103,10 @@ def _calibrate(
     data, extra = read_run(run)
     source = _pick_source(data, extra, name, run)
     _check_band(solution, data, run)
-    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, source, data.channel_width_hz)
+    spectrum = solution.calibrate(
+        data.freq_hz, data.gamma_rec, source,
+        data.channel_width_hz, data.gamma_rec_std,
+    )
     return data, source, spectrum
 
 

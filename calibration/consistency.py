@@ -235,7 +235,10 @@ class HeldOutFit:
 def held_out_fit(solution: Solution, data: CalibrationData, name: str) -> HeldOutFit:
     """The forms of :class:`HeldOutFit` for ``name`` calibrated by ``solution`` (without it)."""
     source = data.sources[name]
-    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, source, data.channel_width_hz)
+    spectrum = solution.calibrate(
+        data.freq_hz, data.gamma_rec, source,
+        data.channel_width_hz, data.gamma_rec_std,
+    )
     if not np.all(spectrum.std_measurement > 0):
         raise InvalidDataError("a consistency check needs the measurement noise per channel", name)
     error = spectrum.mean - np.asarray(source.temperature_k, dtype=float)

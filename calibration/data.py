@@ -197,6 +197,8 @@ class CalibrationData:
     """A calibration run: frequencies, receiver reflection and the calibrators.
 
     Every calibrator needs a temperature. Arrays are checked and coerced on construction.
+    ``gamma_rec_std`` is the complex rms random error of ``gamma_rec`` per channel (or a
+    scalar), as :attr:`SourceData.gamma_std` is of a source's; ``None`` when not known.
     """
 
     freq_hz: FloatArray
@@ -204,6 +206,7 @@ class CalibrationData:
     sources: Mapping[str, SourceData]
     channel_width_hz: float
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    gamma_rec_std: FloatArray | float | None = None
 
     def __post_init__(self) -> None:
         freq = np.asarray(self.freq_hz, dtype=float)
@@ -215,6 +218,11 @@ class CalibrationData:
         gamma_rec = _channel_array(self.gamma_rec, n, "receiver reflection", "receiver", complex)
         if np.max(np.abs(gamma_rec)) >= 1.0:
             raise InvalidDataError("|Gamma_rec| >= 1", "receiver")
+        if self.gamma_rec_std is not None:
+            rec_std = _channel_array(self.gamma_rec_std, n, "reflection error", "receiver")
+            if np.any(rec_std < 0):
+                raise InvalidDataError("reflection error must be >= 0", "receiver")
+            object.__setattr__(self, "gamma_rec_std", rec_std)
         if not (np.isfinite(self.channel_width_hz) and self.channel_width_hz > 0):
             raise InvalidDataError(f"channel width must be > 0, got {self.channel_width_hz}")
         if not self.sources:
@@ -286,6 +294,9 @@ class CalibrationData:
             freq_hz=self.freq_hz[mask],
             gamma_rec=self.gamma_rec[mask],
             sources={n: s.select(mask) for n, s in self.sources.items()},
+            gamma_rec_std=None if self.gamma_rec_std is None else (
+                np.asarray(self.gamma_rec_std)[mask]
+            ),
         )
 
 

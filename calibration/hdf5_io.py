@@ -12,6 +12,7 @@ layout of REACH's own tools::
 
     /observation_data/frequencies              (n,) float, Hz
     /observation_data/lna_s11                  (n,) complex: receiver reflection
+    /observation_data/lna_s11_std              (n,) optional rms random error of lna_s11
     /observation_data/{src}_spectra            P_source, (n,) or (n_spectra, n)
     /observation_data/{src}_load_spectra       P_load,   (n,) or (n_spectra, n)
     /observation_data/{src}_ns_spectra         P_NS,     (n,) or (n_spectra, n)
@@ -233,6 +234,9 @@ def write_run(
         obs = f.create_group("observation_data")
         _dataset(obs, "frequencies", data.freq_hz, "Hz")
         _dataset(obs, "lna_s11", data.gamma_rec, GAMMA_UNITS)
+        if data.gamma_rec_std is not None:
+            rec_std = np.broadcast_to(data.gamma_rec_std, data.freq_hz.shape)
+            _dataset(obs, "lna_s11_std", rec_std, "1")
         meta = f.create_group("observation_metadata")
         meta.attrs.update(
             channel_width_hz=float(data.channel_width_hz),
@@ -323,13 +327,15 @@ class RunLayout:
     calibrators: tuple[str, ...]
     metadata: Mapping[str, Any]
     path: str
+    gamma_rec_std: NDArray[np.float64] | None = None
 
     def split(self) -> tuple[CalibrationData, dict[str, SourceData]]:
         """The calibrators as a checked run, and the other sources (checked) by name."""
         try:
             cals = {n: self.sources[n] for n in self.calibrators}
             data = CalibrationData(
-                self.freq_hz, self.gamma_rec, cals, self.channel_width_hz, self.metadata
+                self.freq_hz, self.gamma_rec, cals, self.channel_width_hz, self.metadata,
+                self.gamma_rec_std,
             )
             return data, self.others()
         except InvalidDataError as err:
@@ -375,7 +381,10 @@ def read_run_layout(f: Any, path: PathLike) -> RunLayout:
         sources = {n: _read_source(obs, meta, temps, n, path) for n in names}
     except InvalidDataError as err:
         raise _in_file(err, path) from err
-    return RunLayout(freq, gamma_rec, width, sources, tuple(calibrators), run_metadata, str(path))
+    rec_std = _array(obs, "lna_s11_std", path).astype(float) if "lna_s11_std" in obs else None
+    return RunLayout(
+        freq, gamma_rec, width, sources, tuple(calibrators), run_metadata, str(path), rec_std
+    )
 
 
 def _basis(obj: Any, path: PathLike, prefix: str = "") -> PolynomialBasis:

@@ -13,6 +13,11 @@ estimator of a source's calibrated temperature ``T_src(f) = x_src(f)^T c`` then 
 
 The floor of a source is that bound per channel and its root mean square over the band,
 the number against which a solution's error is judged ("distance to the floor").
+
+Where the run states the VNA's random errors (the sources' ``gamma_std``, the receiver's
+``gamma_rec_std``), they are noise of the data too: each row's variance gains their
+part (:mod:`calibration.reflection_noise`, as the solver's rows do), and the source's
+own per-channel part, which no estimator of smooth parameters removes, adds to its bound.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from .noise_waves import design_terms
 from .normal_equations import build_normal_equations
 from .polynomial_model import PolynomialParameters, design_rows
 from .radiometric_solver import linearise
+from .reflection_noise import receiver_temperature_variance, temperature_variance
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -66,7 +72,12 @@ def noise_floor(
     temps, _, var_q = data.stacked()
     terms = data.terms()
     noiseless_q = np.asarray((temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float)
-    rows = linearise(terms, temps, noiseless_q, var_q, theta)
+    gammas = np.stack([s.gamma for s in data.sources.values()])
+    extra = _reflection_variance(
+        theta[:, None, :], gammas, data.gamma_rec, noiseless_q, data.reflection_errors(),
+        data.gamma_rec_std,
+    )
+    rows = linearise(terms, temps, noiseless_q, var_q, theta, extra)
     normal = build_normal_equations(
         rows.features,
         rows.weights,
@@ -79,4 +90,25 @@ def noise_floor(
     src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
     src_rows = design_rows(src_terms.matrix(source.q), basis, orders)
     z = solve_triangular(chol, src_rows.T, lower=True)
-    return NoiseFloor(freq, np.sqrt(np.sum(z**2, axis=0)))
+    direct = _reflection_variance(
+        theta, source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec, source.q,
+        source.gamma_std, data.gamma_rec_std,
+    )
+    return NoiseFloor(freq, np.sqrt(np.sum(z**2, axis=0) + direct))
+
+
+def _reflection_variance(
+    theta: FloatArray,
+    gamma: ComplexArray,
+    gamma_rec: ComplexArray,
+    q: FloatArray,
+    gamma_std: FloatArray | float | None,
+    gamma_rec_std: FloatArray | float | None,
+) -> FloatArray | float:
+    """Temperature variance from the stated reflection errors (0 where none is stated)."""
+    out: FloatArray | float = 0.0
+    if gamma_std is not None:
+        out = out + temperature_variance(theta, gamma, gamma_rec, q, gamma_std)
+    if gamma_rec_std is not None:
+        out = out + receiver_temperature_variance(theta, gamma, gamma_rec, q, gamma_rec_std)
+    return out

@@ -13,12 +13,22 @@ For a calibrator, this variance sits in the residual of each of its rows (the ra
 solver adds it to the row's radiometer variance, about its operating point); for a
 calibrated source, in its predictive (:meth:`calibration.solution.Solution.calibrate`).
 
-Not covered: the receiver's own reflection (its error is common to every source at a
-channel, so it is not a per-row variance), and the VNA's systematic errors (thesis table
-2.3), which are correlated across channels.
+The receiver's own reflection ``Gamma_rec`` is measured by the same VNA, and its error
+moves ``T`` the same way with ``J = dT / d(Re, Im) Gamma_rec``
+(:func:`receiver_temperature_variance`). That error is common to every source at a
+channel: for a calibrated source it is a variance of its own, per channel, which no fit of
+smooth parameters can absorb, and the predictive carries it; in the calibrators' rows it
+is treated as independent between sources (the fit sees it only through the residuals of
+smooth polynomials across channels, where the correlation between sources at one channel
+does not bias it). Two errors on different sweeps are independent and their variances add.
+
+Not covered: the VNA's systematic errors (thesis table 2.3), which are correlated across
+channels.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -46,11 +56,34 @@ def temperature_variance(
     """
     g = np.asarray(gamma, dtype=complex)
 
+    def temperature(step: complex) -> FloatArray:
+        return np.asarray(source_temperature(theta, design_terms(g + step, gamma_rec), q))
+
+    return _variance(temperature, gamma_std)
+
+
+def receiver_temperature_variance(
+    theta: FloatArray,
+    gamma: ArrayLike,
+    gamma_rec: ArrayLike,
+    q: ArrayLike,
+    gamma_rec_std: ArrayLike,
+) -> FloatArray:
+    """``var_T`` (K^2) from the receiver reflection's error ``gamma_rec_std`` (module docstring)."""
+    g_rec = np.asarray(gamma_rec, dtype=complex)
+
+    def temperature(step: complex) -> FloatArray:
+        return np.asarray(source_temperature(theta, design_terms(gamma, g_rec + step), q))
+
+    return _variance(temperature, gamma_rec_std)
+
+
+def _variance(temperature: Callable[[complex], FloatArray], std: ArrayLike) -> FloatArray:
+    """``(J_re^2 + J_im^2) sigma^2 / 2`` with ``J`` by central differences of ``temperature``."""
+
     def slope(step: complex) -> FloatArray:
-        up = source_temperature(theta, design_terms(g + step, gamma_rec), q)
-        down = source_temperature(theta, design_terms(g - step, gamma_rec), q)
-        return np.asarray((up - down) / (2 * STEP), dtype=float)
+        return (temperature(step) - temperature(-step)) / (2 * STEP)
 
     j_re, j_im = slope(STEP), slope(1j * STEP)
-    sigma = np.asarray(gamma_std, dtype=float)
+    sigma = np.asarray(std, dtype=float)
     return np.asarray((j_re**2 + j_im**2) * sigma**2 / 2.0, dtype=float)

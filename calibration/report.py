@@ -119,7 +119,10 @@ def calibrate_run(inputs: ReportInputs) -> Calibrated:
         return Calibrated({}, {})
     sources = {**data.sources, **inputs.others}
     spectra = {
-        name: inputs.solution.calibrate(data.freq_hz, data.gamma_rec, src, data.channel_width_hz)
+        name: inputs.solution.calibrate(
+            data.freq_hz, data.gamma_rec, src,
+            data.channel_width_hz, data.gamma_rec_std,
+        )
         for name, src in sources.items()
     }
     references = {

@@ -275,6 +275,7 @@ def simulate_run(
         sources=sources,
         channel_width_hz=config.channel_width_hz,
         metadata={"simulated": True, "integration_s": config.integration_s},
+        gamma_rec_std=config.vna_sigma if rng is not None and config.vna_sigma > 0 else None,
     )
     t_val = np.full(freq.shape, config.temperature_k(validation))
     return SimulatedRun(

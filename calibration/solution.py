@@ -30,7 +30,7 @@ from .data import SourceData, check_source
 from .errors import InvalidDataError
 from .noise_waves import INDEX, PARAMETERS, design_terms
 from .polynomial_model import Orders, PolynomialParameters, coefficient_slices, design_rows
-from .reflection_noise import temperature_variance
+from .reflection_noise import receiver_temperature_variance, temperature_variance
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -172,11 +172,15 @@ class Solution:
         gamma_rec: ComplexArray,
         source: SourceData,
         channel_width_hz: float | None = None,
+        gamma_rec_std: FloatArray | float | None = None,
     ) -> CalibratedSpectrum:
         """Calibrate ``source`` (eq. 3.27) with its predictive uncertainty.
 
         ``channel_width_hz`` is needed for the radiometer measurement noise; without it
         only the calibration error is reported for the radiometric solver.
+        ``gamma_rec_std`` (the run's :attr:`CalibrationData.gamma_rec_std`) and the
+        source's own ``gamma_std`` add the VNA's random errors to the measurement part
+        (:mod:`calibration.reflection_noise`).
         """
         freq = np.asarray(freq_hz, dtype=float)
         source = check_source(source, freq.size)
@@ -203,6 +207,12 @@ class Solution:
                 self.evaluate(freq), source.gamma, gamma_rec, source.q, source.gamma_std
             )
             std_meas = np.sqrt(std_meas**2 + var_gamma)
+        if gamma_rec_std is not None:
+            var_rec = receiver_temperature_variance(
+                self.evaluate(freq), source.gamma, gamma_rec, source.q,
+                np.broadcast_to(np.asarray(gamma_rec_std, dtype=float), freq.shape),
+            )
+            std_meas = np.sqrt(std_meas**2 + var_rec)
         return CalibratedSpectrum(
             freq,
             mean,

@@ -99,7 +99,10 @@ def _rms(values: FloatArray) -> float:
 def held_out(solution: Solution, data: CalibrationData, name: str) -> HeldOut:
     """Calibrate ``data``'s calibrator ``name`` with ``solution`` and score it (module doc)."""
     source = data.sources[name]
-    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, source, data.channel_width_hz)
+    spectrum = solution.calibrate(
+        data.freq_hz, data.gamma_rec, source,
+        data.channel_width_hz, data.gamma_rec_std,
+    )
     error = spectrum.mean - np.asarray(source.temperature_k, dtype=float)
     predicted = np.sqrt(spectrum.std**2 + source.temperature_std_k**2)
     inside = []

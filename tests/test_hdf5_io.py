@@ -87,6 +87,22 @@ def test_optional_fields_and_a_source_with_temperature_round_trip(tmp_path, run)
     _assert_same_source(extra["ant"], ant)
 
 
+def test_reflection_errors_round_trip_and_follow_a_channel_selection(tmp_path, run):
+    n = run.data.n_channels
+    rec_std = np.linspace(1e-3, 2e-3, n)
+    cold = replace(run.data.sources["cold"], gamma_std=np.full(n, 5e-4))
+    data = replace(run.data, sources={**run.data.sources, "cold": cold}, gamma_rec_std=rec_std)
+    write_run(tmp_path / "run.h5", data)
+    back, _ = read_run(tmp_path / "run.h5")
+    np.testing.assert_array_equal(back.gamma_rec_std, rec_std)
+    np.testing.assert_array_equal(back.sources["cold"].gamma_std, np.full(n, 5e-4))
+    assert read_run(tmp_path / "run.h5")[0].sources["hot"].gamma_std is None
+    mask = np.arange(n) % 3 == 0
+    np.testing.assert_array_equal(back.select(mask).gamma_rec_std, rec_std[mask])
+    with pytest.raises(InvalidDataError, match="receiver.*>= 0"):
+        replace(data, gamma_rec_std=-rec_std)
+
+
 def test_truth_round_trip(run_file, run, tmp_path):
     truth = read_truth(run_file)
     assert truth is not None

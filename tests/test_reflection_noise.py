@@ -44,10 +44,11 @@ def _stripped(source):
 @pytest.mark.parametrize("integration_s", [120.0, 1800.0])
 def test_reflection_error_makes_the_predictive_honest(integration_s):
     """With VNA noise comparable to the radiometer's, the predictive matches the actual
-    error once the reflection error is modelled; ignored, the noise scale s^2 absorbs it
-    and inflates the antenna's radiometer term instead. (s^2 stays above 1 either way: the
-    receiver reflection's error, common to every source at a channel, is not modelled.)"""
-    ratios, scales, ignored_scales = [], [], []
+    error once the reflection errors (the sources' and the receiver's) are modelled, for the
+    noisy antenna and for its noiseless twin, whose only per-channel error is then the
+    receiver reflection's; the noise scale s^2 is 1, as the radiometer equation makes it.
+    Ignored, s^2 absorbs the sources' errors and inflates the antenna's radiometer term."""
+    ratios, clean_ratios, scales, ignored_scales = [], [], [], []
     for seed in range(10):
         config = SimulationConfig(
             channel_width_hz=WIDTH, integration_s=integration_s, vna_sigma=VNA_SIGMA
@@ -56,10 +57,17 @@ def test_reflection_error_makes_the_predictive_honest(integration_s):
         data = run.data
         solution = solve_radiometric(data)
         spectrum = solution.calibrate(
-            data.freq_hz, data.gamma_rec, run.validation, data.channel_width_hz
+            data.freq_hz, data.gamma_rec, run.validation, data.channel_width_hz,
+            data.gamma_rec_std,
         )
         error = spectrum.mean - run.validation_temperature_k
         ratios.append(np.sqrt(np.mean(error**2) / np.mean(spectrum.std**2)))
+        clean = solution.calibrate(
+            data.freq_hz, data.gamma_rec, run.validation_noiseless,
+            gamma_rec_std=data.gamma_rec_std,
+        )
+        error = clean.mean - run.validation_temperature_k
+        clean_ratios.append(np.sqrt(np.mean(error**2) / np.mean(clean.std**2)))
         scales.append(solution.posterior.noise_variance)
         bare = replace(data, sources={n: _stripped(s) for n, s in data.sources.items()})
         ignored_scales.append(solve_radiometric(bare).posterior.noise_variance)
@@ -67,4 +75,6 @@ def test_reflection_error_makes_the_predictive_honest(integration_s):
     # 10 runs x 820 channels; the channels are correlated through the calibration error,
     # so the ratio scatters by a few percent run to run.
     assert 0.9 < rms_ratio < 1.1
+    assert 0.9 < float(np.sqrt(np.mean(np.square(clean_ratios)))) < 1.1
+    assert 0.95 < np.median(scales) < 1.05  # 10 x ~10^4 rows: s^2 known to ~1 %
     assert np.median(ignored_scales) > 1.3 * np.median(scales)

@@ -112,7 +112,10 @@ def calibrate(
         handover = dataclasses.replace(handover, corrections=report)
     solution = solve_radiometric(data)
     validation = others.get(ANTENNA) or data.sources[data.names[0]]
-    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, validation, data.channel_width_hz)
+    spectrum = solution.calibrate(
+        data.freq_hz, data.gamma_rec, validation,
+        data.channel_width_hz, data.gamma_rec_std,
+    )
     return CalibrationOutcome(
         solution=solution,
         data=data,

@@ -54,7 +54,8 @@ def calibrate_cycle(run: RunContext, source: str, number: int, name: str, thresh
         return
     layout = view.layout
     spectrum = solution.calibrate(
-        layout.freq_hz, layout.gamma_rec, view.others[source], layout.channel_width_hz
+        layout.freq_hz, layout.gamma_rec, view.others[source], layout.channel_width_hz,
+        layout.gamma_rec_std,
     )
     flags = rfi_flags(spectrum.mean, threshold)
     run.store.add_calibrated(
