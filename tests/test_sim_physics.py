@@ -57,7 +57,7 @@ def test_dicke_ratio_matches_engine_model_with_effective_truth(physics, source):
     powers = {}
     for name, ns_on in ((source, False), ("cold", False), ("ns", True)):
         physics.update_pins(pins_for(name, "lna", ns_on))
-        powers[name] = physics._noiseless_power(physics.lna_input(), t)[BAND]
+        powers[name] = physics.noiseless_power(physics.lna_input(), t)[BAND]
     q = (powers[source] - powers["cold"]) / (powers["ns"] - powers["cold"])
     freq = physics.freq_hz[BAND]
     theta = physics.effective_theta(freq)

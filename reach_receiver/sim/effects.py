@@ -41,6 +41,7 @@ from calibration.reflections import CABLE_2M, CABLE_10M, HEATED_LOAD_CABLE, Cabl
 from calibration.source_temperatures import available_gain, cable_source_temperature
 from calibration.touchstone import TouchstoneData, write_touchstone_network
 from calibration.two_port import embed_reflection, flip_ports
+from reach_receiver.config.corrections import CableSettings, CorrectionSettings
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -141,3 +142,16 @@ class SimEffects:
             write_touchstone_network(file, net)
             paths[key] = str(file)
         return paths
+
+    def site_corrections(self, two_ports: dict[str, str]) -> CorrectionSettings:
+        """What a site file says of these effects (``two_ports``: :meth:`write_two_ports`)."""
+        cables = {
+            name: CableSettings(port, None, c.length_m, c.velocity_factor, c.loss_db_per_m_100mhz)
+            for name, (c, port) in self.cables().items()
+        }
+        return CorrectionSettings(
+            mts_sources=two_ports.get("sources") if self.mts else None,
+            mts_lna=two_ports.get("lna") if self.mts else None,
+            cables=cables,
+            rfi=self.rfi,
+        )

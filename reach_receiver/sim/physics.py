@@ -238,10 +238,15 @@ class ReceiverPhysics:
         return {0x18: enclosure, 0x19: enclosure + 0.2, 0x1A: lna, 0x1B: enclosure - 0.1}
 
     # ----------------------------------------------------------------- spectra
-    def _noiseless_power(self, name: str, t: float) -> FloatArray:
-        """``P = g (T_src (1-|G|^2)|F|^2 + noise waves + T_0)`` for the source at the LNA."""
+    def noiseless_power(self, name: str, t: float, ns_on: bool | None = None) -> FloatArray:
+        """``P = g (T_src (1-|G|^2)|F|^2 + noise waves + T_0)`` for the source at the LNA.
+
+        Every channel, at time ``t``, effects on; the noise source's diode is powered as
+        ``ns_on`` says (default: as its pin is now).
+        """
         t_src: float | FloatArray = self.source_temperature_k(name, t)
-        if name == NOISE_SOURCE and self._on("ns"):
+        diode = self._on("ns") if ns_on is None else ns_on
+        if name == NOISE_SOURCE and diode:
             t_src = self.enclosure_k() + self._enr_k
         elif name == "ant":
             t_src = self.sky_temperature_k(self._model_freq, t)
@@ -274,18 +279,8 @@ class ReceiverPhysics:
         t = self._t0
         p0 = self._power(name, np.zeros(self._model_freq.shape), t)[k]
         dp = self._power(name, np.ones(self._model_freq.shape), t)[k] - p0
-        p_l = self._noiseless_power(REFERENCE_LOAD, t)[k]
-        with self._lock:
-            ns_on = self._pins.get("ns")
-            self._pins["ns"] = "1"
-        try:
-            p_ns = self._noiseless_power(NOISE_SOURCE, t)[k]
-        finally:
-            with self._lock:
-                if ns_on is None:
-                    self._pins.pop("ns")
-                else:
-                    self._pins["ns"] = ns_on
+        p_l = self.noiseless_power(REFERENCE_LOAD, t)[k]
+        p_ns = self.noiseless_power(NOISE_SOURCE, t, ns_on=True)[k]
         return np.asarray((np.asarray(q) * (p_ns - p_l) + p_l - p0) / dp, dtype=float)
 
     def sky_temperature_k(self, freq_hz: FloatArray, t: float) -> FloatArray:
@@ -304,7 +299,7 @@ class ReceiverPhysics:
         t_mid = t_start + 0.5 * duration_s
         radiometer = 1.0 / math.sqrt(self.config.channel_width_hz * duration_s)
         if self._on("6v"):
-            p0 = self._noiseless_power(self.lna_input(), t_mid)
+            p0 = self.noiseless_power(self.lna_input(), t_mid)
             if self.config.effects.rfi:
                 with self._lock:
                     n_lines = len(self.config.effects.rfi_channels_hz)
@@ -313,7 +308,7 @@ class ReceiverPhysics:
                 p0 = np.asarray(p0 * (1.0 + spikes), dtype=float)
         else:
             p0 = np.full(self.freq_hz.shape, 1e-10 * float(np.mean(self._gain)))
-        p1 = self._noiseless_power(REFERENCE_LOAD, t_mid)
+        p1 = self.noiseless_power(REFERENCE_LOAD, t_mid)
         out = np.stack([p0, p1])
         with self._lock:
             noise = self._rng.standard_normal(out.shape)

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from reach_receiver.clock import Clock, CompressedClock
-from reach_receiver.config.corrections import CableSettings, CorrectionSettings
+from reach_receiver.config.corrections import CorrectionSettings
 from reach_receiver.config.settings import (
     DeviceSettings,
     SpectrometerSettings,
@@ -267,17 +267,7 @@ class SimulatedReceiver:
 
     def corrections(self) -> CorrectionSettings:
         """What the site file says of the simulated effects' two-ports, cables and RFI."""
-        effects = self.physics.config.effects
-        cables = {
-            name: CableSettings(port, None, c.length_m, c.velocity_factor, c.loss_db_per_m_100mhz)
-            for name, (c, port) in effects.cables().items()
-        }
-        return CorrectionSettings(
-            mts_sources=self._two_ports.get("sources") if effects.mts else None,
-            mts_lna=self._two_ports.get("lna") if effects.mts else None,
-            cables=cables,
-            rfi=effects.rfi,
-        )
+        return self.physics.config.effects.site_corrections(self._two_ports)
 
     def close(self) -> None:
         """Stop every simulator (in reverse order of start) and remove temporary files."""
