@@ -8,6 +8,7 @@ import pytest
 from matplotlib.figure import Figure
 from matplotlib.image import imread
 from matplotlib.text import Text
+from matplotlib.transforms import Bbox
 from scipy import stats
 
 from calibration import figures
@@ -39,13 +40,38 @@ def solution(run):
 
 
 def render(fig: Figure, path: Path) -> np.ndarray:
-    """Save ``fig`` as PNG and return its grey levels; check the size it says it has."""
+    """Save ``fig`` as PNG and return its grey levels; check its size and its layout."""
     figures.save_png(fig, path)
     pixels = imread(path)
     width, height = fig.get_size_inches() * DPI
     assert pixels.shape[:2] == (round(height), round(width))
     assert pixels.shape[1] == round(WIDTH_IN * DPI)
+    assert_laid_out(fig)
     return pixels[..., :3].mean(axis=2)
+
+
+def assert_laid_out(fig: Figure) -> None:
+    """Every axes with its labels and title, each legend and the title: inside, apart.
+
+    The layout is fixed (margins in inches, not searched): this is what the search
+    guaranteed, checked on the drawn figure.
+    """
+    renderer = fig.canvas.get_renderer()
+    boxes = {f"axes {i} ({ax.get_title()!r})": ax.get_tightbbox(renderer)
+             for i, ax in enumerate(fig.axes)}
+    boxes.update({f"legend {i}": lg.get_window_extent(renderer)
+                  for i, lg in enumerate(fig.legends)})
+    if fig.get_suptitle():
+        boxes["title"] = fig._suptitle.get_window_extent(renderer)
+    page = fig.bbox.padded(0.5)  # the rounding of a pixel
+    for name, box in boxes.items():
+        assert page.x0 <= box.x0 and box.x1 <= page.x1, (name, box, page)
+        assert page.y0 <= box.y0 and box.y1 <= page.y1, (name, box, page)
+    names = list(boxes)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            overlap = Bbox.intersection(boxes[a], boxes[b])
+            assert overlap is None or min(overlap.width, overlap.height) < 1, (a, b, overlap)
 
 
 def assert_drawn(fig: Figure, path: Path) -> None:

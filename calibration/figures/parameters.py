@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 from scipy import stats
 
@@ -24,12 +25,17 @@ from ..polynomial_model import PolynomialParameters
 from ..solution import Solution
 from .style import (
     BAND_ALPHA,
+    LEGEND_ROW_IN,
     PARAMETER_COLOURS,
     PARAMETER_LABELS,
+    Space,
+    grid,
+    legend_below,
     mhz,
     new_figure,
     note,
     styled,
+    suptitle,
 )
 
 FloatArray = NDArray[np.float64]
@@ -88,7 +94,8 @@ def noise_wave_parameters(
     mean, bands = parameter_bands(solution, freq)
     true = None if truth is None else truth.evaluate(freq)
     fig = new_figure(8.6)
-    axes = fig.subplots(len(PARAMETERS), 2, sharex=True, squeeze=False)
+    spec = grid(fig, len(PARAMETERS), 2, Space(bottom=0.6 + LEGEND_ROW_IN, hspace=0.18))
+    axes = spec.subplots(sharex=True, squeeze=False)
     x = mhz(freq)
     for k, name in enumerate(PARAMETERS):
         colour, label = PARAMETER_COLOURS[name], PARAMETER_LABELS[name]
@@ -111,11 +118,9 @@ def noise_wave_parameters(
         ax.set_xlabel("frequency (MHz)")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     more, more_labels = axes[0, 1].get_legend_handles_labels()
-    fig.legend(handles + more, labels + more_labels, loc="outside lower center", ncols=5)
+    legend_below(fig, handles + more, labels + more_labels, columns=5)
     orders = ", ".join(map(str, solution.best_orders))
-    fig.suptitle(
-        f"Noise-wave parameters ({solution.method} solver, orders {orders})", fontweight="bold"
-    )
+    suptitle(fig, f"Noise-wave parameters ({solution.method} solver, orders {orders})")
     return fig
 
 
@@ -133,11 +138,27 @@ def evidence_profile(solution: Solution) -> dict[str, dict[int, float]]:
     return profile
 
 
+_SUPERSCRIPTS = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
+
+
+def _power_of_ten(value: float, _position: int | None = None) -> str:
+    """A symlog tick label: ``0``, ``−10``, ``−10³`` (Unicode: mathtext costs a parse each)."""
+    if value == 0:
+        return "0"
+    exponent = round(np.log10(abs(value)))
+    sign = "−" if value < 0 else ""
+    if not np.isclose(abs(value), 10.0**exponent):
+        return f"{value:g}".replace("-", "−")
+    return sign + ("10" if exponent == 1 else f"10{str(exponent).translate(_SUPERSCRIPTS)}")
+
+
 @styled
 def evidence_landscape(solution: Solution) -> Figure:
     """The evidence over model orders: a profile per parameter and the leading models."""
     fig = new_figure(4.8)
-    prof_ax, top_ax = fig.subplots(1, 2, width_ratios=(1.1, 1))
+    space = Space(top=0.35, bottom=0.6 + LEGEND_ROW_IN, left=0.9, wspace=1.35)
+    spec = grid(fig, 1, 2, space, width_ratios=(1.1, 1))
+    prof_ax, top_ax = fig.add_subplot(spec[0, 0]), fig.add_subplot(spec[0, 1])
     table = solution.evidence_table
     if not table:
         note(prof_ax, "this solution has no evidence table\n(its orders were fixed)")
@@ -154,13 +175,15 @@ def evidence_landscape(solution: Solution) -> Figure:
         )
         prof_ax.plot(best_orders[k] + offset, 0.0, "*", color=PARAMETER_COLOURS[name], ms=12)
     prof_ax.set_xlabel("number of polynomial terms of the parameter")
-    prof_ax.set_ylabel(r"best $\Delta\log Z$ over the other orders (nats)")
+    prof_ax.set_ylabel("best Δ log Z over the other orders (nats)")
     prof_ax.text(0.01, 0.01, f"linear within {LINEAR_NATS:g} nats, logarithmic below",
                  transform=prof_ax.transAxes, fontsize=8, color="0.4")
     prof_ax.set_title(f"evidence profile ({len(table)} models; ★ best)")
     prof_ax.set_yscale("symlog", linthresh=LINEAR_NATS)
+    prof_ax.yaxis.set_major_formatter(FuncFormatter(_power_of_ten))
     prof_ax.set_ylim(top=3)
-    fig.legend(*prof_ax.get_legend_handles_labels(), loc="outside lower center", ncols=5)
+    handles, labels = prof_ax.get_legend_handles_labels()
+    legend_below(fig, handles, labels, columns=5)
 
     weights = {
         tuple(w["orders"]): float(w["weight"])
@@ -174,7 +197,7 @@ def evidence_landscape(solution: Solution) -> Figure:
     top_ax.barh(y, deltas, color="C0", alpha=0.7)
     top_ax.set_yticks(y, labels, fontfamily="monospace")
     top_ax.invert_yaxis()
-    top_ax.set_xlabel(r"$\Delta\log Z$ from the best (nats)")
+    top_ax.set_xlabel("Δ log Z from the best (nats)")
     span = min(deltas) if min(deltas) < 0 else -1.0
     top_ax.set_ylabel("orders (unc, cos, sin, NS, L)")
     top_ax.set_title("leading models")
@@ -183,6 +206,6 @@ def evidence_landscape(solution: Solution) -> Figure:
         for yi, (orders, _) in zip(y, ranked, strict=True):
             weight = weights.get(tuple(orders))
             text = f"{weight:.3f}" if weight is not None else "—"
-            top_ax.text(span * 1.02, yi, text, va="center", ha="right", fontsize=9)
+            top_ax.text(span * 1.02, float(yi), text, va="center", ha="right", fontsize=9)
     top_ax.set_xlim(span * (1.25 if weights else 1.05), 0.05 * abs(span))
     return fig

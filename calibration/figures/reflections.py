@@ -16,7 +16,19 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from ..data import CalibrationData, SourceData
-from .style import NEUTRAL, WIDTH_PX, envelope, mhz, new_figure, source_styles, styled
+from .style import (
+    NEUTRAL,
+    WIDTH_PX,
+    Space,
+    envelope,
+    grid,
+    legend_right,
+    mhz,
+    new_figure,
+    source_styles,
+    styled,
+    suptitle,
+)
 
 ComplexArray = NDArray[np.complex128]
 
@@ -24,6 +36,8 @@ ComplexArray = NDArray[np.complex128]
 GRID_VALUES = (0.2, 0.5, 1.0, 2.0, 5.0)
 #: The receiver's trace is labelled so.
 RECEIVER = "receiver (LNA)"
+#: A Smith chart (no tick labels) beside a plot in dB: little room left of the chart.
+SMITH_SPACE = Space(left=0.2, wspace=0.9)
 
 
 def _gamma(z: NDArray[Any]) -> ComplexArray:
@@ -69,7 +83,8 @@ def reflections(
     styles = source_styles(sources)
     styles[RECEIVER] = {"color": NEUTRAL, "ls": "-."}
     fig = new_figure(5.4)
-    smith, db = fig.subplots(1, 2, width_ratios=(1, 1.25))
+    spec = grid(fig, 1, 2, SMITH_SPACE, width_ratios=(1, 1.25))
+    smith, db = fig.add_subplot(spec[0, 0]), fig.add_subplot(spec[0, 1])
     smith_grid(smith)
     x = mhz(data.freq_hz)
     for name, gamma in traces.items():
@@ -80,8 +95,8 @@ def reflections(
         db.plot(*envelope(x, level, WIDTH_PX // 2), label=name, **style)
     smith.set_title(f"Smith chart ({x[0]:.0f}-{x[-1]:.0f} MHz, ● at {x[0]:.0f} MHz)")
     db.set_xlabel("frequency (MHz)")
-    db.set_ylabel(r"$|\Gamma|$ (dB)")
+    db.set_ylabel("|Γ| (dB)")
     db.set_title("reflection magnitude")
-    fig.legend(loc="outside right center")
-    fig.suptitle("Reflection coefficients of the sources and the receiver", fontweight="bold")
+    legend_right(fig, spec, *db.get_legend_handles_labels())
+    suptitle(fig, "Reflection coefficients of the sources and the receiver")
     return fig

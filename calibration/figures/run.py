@@ -18,15 +18,20 @@ from numpy.typing import NDArray
 from ..data import CalibrationData, SourceData
 from ..run_records import TemperatureLog
 from .style import (
+    RC,
     WIDTH_PX,
+    Space,
     axes_grid,
     envelope,
-    legend_outside,
+    grid,
+    legend_right,
     mhz,
     new_figure,
     note,
     source_styles,
     styled,
+    suptitle,
+    text_width_in,
 )
 
 FloatArray = NDArray[np.float64]
@@ -37,9 +42,9 @@ Q_DEFINITION = (
     r"$Q = (P_\mathrm{source} - P_\mathrm{load})\,/\,(P_\mathrm{NS} - P_\mathrm{load})$"
 )
 _POSITIONS = (
-    ("p_source", r"$P_\mathrm{source}$", "switch on the source"),
-    ("p_load", r"$P_\mathrm{load}$", "switch on the reference load"),
-    ("p_ns", r"$P_\mathrm{NS}$", "switch on the noise source"),
+    ("p_source", r"$P_\mathrm{source}$", "on the source"),
+    ("p_load", r"$P_\mathrm{load}$", "on the reference load"),
+    ("p_ns", r"$P_\mathrm{NS}$", "on the noise source"),
 )
 
 
@@ -57,7 +62,12 @@ def dicke_powers(
     sources = {**data.sources, **dict(others or {})}
     styles = source_styles(sources)
     fig = new_figure(7.0)
-    axes, bottom = axes_grid(fig, 4, 2)
+    spec = grid(fig, 2, 2)
+    axes = [fig.add_subplot(spec[0, 0])]
+    axes += [fig.add_subplot(spec[i // 2, i % 2], sharex=axes[0]) for i in range(1, 4)]
+    bottom = axes[2:]
+    for ax in axes[:2]:
+        ax.tick_params(labelbottom=False)
     x = mhz(data.freq_hz)
     for name, src in sources.items():
         for ax, (attr, _, _) in zip(axes, _POSITIONS, strict=False):
@@ -66,15 +76,15 @@ def dicke_powers(
         axes[3].plot(*envelope(x, src.q, WIDTH_PX // 2), lw=0.8, label=name, **styles[name])
     for ax, (attr, label, title) in zip(axes, _POSITIONS, strict=False):
         ax.set_ylabel(f"{label} (arbitrary power)")
-        ax.set_title(f"{label}: {title}")
-        if attr != "p_source":
-            ax.set_title(f"{label}: {title}; sources differ by {_spread(sources, attr):.2%}")
+        ax.set_title(f"{label}: switch {title}")
+        if attr != "p_source":  # the same for every source but for the noise
+            ax.set_title(f"{label}: {title} (sources differ by {_spread(sources, attr):.2%})")
     axes[3].set_ylabel("Q (eq. 3.9)")
     axes[3].set_title(Q_DEFINITION)
     for ax in bottom:
         ax.set_xlabel("frequency (MHz)")
-    legend_outside(fig, axes)
-    fig.suptitle("Dicke powers of the run", fontweight="bold")
+    legend_right(fig, spec, *axes[0].get_legend_handles_labels())
+    suptitle(fig, "Dicke powers of the run")
     return fig
 
 
@@ -101,17 +111,19 @@ def flagged_channels(freq_hz: FloatArray, flags: Flags | None = None) -> Figure:
     """
     rows = _rows(np.asarray(freq_hz, dtype=float), flags) if flags is not None else {}
     fig = new_figure(1.6 + 0.35 * max(len(rows), 2))
-    ax = fig.add_subplot()
     if not rows:
-        note(ax, "this run has no channel flags\n(no RFI flagging was stored with it)")
+        text = "this run has no channel flags\n(no RFI flagging was stored with it)"
+        note(fig.add_subplot(), text)
         return fig
-    labels = []
-    for i, (name, (freq, mask)) in enumerate(rows.items()):
+    labels = [f"{name}: {np.count_nonzero(m)} ({np.mean(m):.2%})" for name, (_, m) in rows.items()]
+    # The y tick labels name the spectra, of any length: the left margin is measured.
+    left = text_width_in(fig, labels, RC["ytick.labelsize"]) + 0.25
+    ax = fig.add_subplot(grid(fig, 1, 1, Space(left=left, top=0.4))[0, 0])
+    for i, (freq, mask) in enumerate(rows.values()):
         x = mhz(freq)
         width = float(np.median(np.diff(x))) if x.size > 1 else 0.01
         flagged = x[mask]
         ax.broken_barh([(f - width / 2, width) for f in flagged], (i - 0.4, 0.8), color="C3")
-        labels.append(f"{name}: {np.count_nonzero(mask)} ({np.mean(mask):.2%})")
     ax.set_yticks(range(len(rows)), labels)
     ax.set_ylim(len(rows) - 0.5, -0.5)
     band = mhz(np.asarray(freq_hz, dtype=float))
@@ -136,7 +148,7 @@ def temperatures(log: TemperatureLog | None, columns: int = 3) -> Figure:
     n = len(log.channels)
     rows = -(-n // columns)
     fig = new_figure(1.0 + 1.8 * rows)
-    axes, bottom = axes_grid(fig, n, columns)
+    axes, bottom = axes_grid(fig, n, columns, space=Space(top=0.6, hspace=0.42, wspace=0.8))
     hours = (log.timestamps_s - log.timestamps_s[0]) / 3600.0
     for k, (ax, channel) in enumerate(zip(axes, log.channels, strict=True)):
         values = log.values_c[:, k]
@@ -147,5 +159,5 @@ def temperatures(log: TemperatureLog | None, columns: int = 3) -> Figure:
             ax.set_ylabel("°C")
     for ax in bottom:
         ax.set_xlabel("time since the first reading (h)")
-    fig.suptitle(f"Thermocouples over the run ({hours[-1]:.1f} h)", fontweight="bold")
+    suptitle(fig, f"Thermocouples over the run ({hours[-1]:.1f} h)")
     return fig

@@ -19,7 +19,20 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from ..solution import CalibratedSpectrum
-from .style import NEUTRAL, WIDTH_PX, axes_grid, envelope, mhz, new_figure, note, styled
+from .style import (
+    LEGEND_ROW_IN,
+    NEUTRAL,
+    WIDTH_PX,
+    Space,
+    axes_grid,
+    envelope,
+    legend_below,
+    mhz,
+    new_figure,
+    note,
+    styled,
+    suptitle,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -90,7 +103,9 @@ def calibrated_sources(
     if not spectra:
         note(fig.add_subplot(), "no calibrated source to show")
         return fig
-    axes, bottom = axes_grid(fig, n, columns)
+    # Room between the rows for the panels' titles, and below for a legend.
+    space = Space(bottom=0.6 + LEGEND_ROW_IN, wspace=0.85, hspace=0.42)
+    axes, bottom = axes_grid(fig, n, columns, space=space)
     pixels = WIDTH_PX // columns
     for i, (ax, (name, spectrum)) in enumerate(zip(axes, spectra.items(), strict=True)):
         reference = references.get(name)
@@ -106,9 +121,8 @@ def calibrated_sources(
     with_reference = [ax for ax, name in zip(axes, spectra, strict=True) if name in references]
     if with_reference:
         handles, labels = with_reference[0].get_legend_handles_labels()
-        fig.legend(handles, labels, loc="outside lower center", ncols=len(labels))
-    fig.suptitle(
-        "Calibrated sources: residual against the known temperature, and the predicted noise",
-        fontweight="bold",
+        legend_below(fig, handles, labels, columns=len(labels))
+    suptitle(
+        fig, "Calibrated sources: residual against the known temperature, and the predicted noise"
     )
     return fig

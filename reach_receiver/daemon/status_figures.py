@@ -27,17 +27,21 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from calibration.figures import noise_wave_parameters, temperatures
-from calibration.figures.reflections import smith_grid
+from calibration.figures.reflections import SMITH_SPACE, smith_grid
 from calibration.figures.style import (
     NEUTRAL,
     WIDTH_PX,
+    Space,
     axes_grid,
     envelope,
+    grid,
+    legend_right,
     mhz,
     new_figure,
     note,
     source_styles,
     styled,
+    suptitle,
 )
 from calibration.noise_waves import q_from_powers
 from calibration.run_records import TemperatureLog
@@ -113,7 +117,7 @@ def dicke_spectra(runs: Path) -> Figure:
     power = {p: np.asarray(arrays[f"{p}/spectrum"], float)[0, band] for p, _ in _POSITIONS}
     x = mhz(freq[band])
     fig = new_figure(5.6)
-    axes, bottom = axes_grid(fig, 4, 2)
+    axes, bottom = axes_grid(fig, 4, 2, space=Space(top=0.6))
     for ax, (position, label) in zip(axes, _POSITIONS, strict=False):
         level = 10 * np.log10(np.maximum(power[position], 1e-30))
         ax.plot(*envelope(x, level, WIDTH_PX // 2), color=NEUTRAL, lw=0.8)
@@ -126,9 +130,8 @@ def dicke_spectra(runs: Path) -> Figure:
     axes[3].set_ylabel("Q")
     for ax in bottom:
         ax.set_xlabel("frequency (MHz)")
-    fig.suptitle(
-        f"Latest Dicke cycle: {cycle.name}, {_stamp(cycle.timestamp)} (run {contents.name})",
-        fontweight="bold",
+    suptitle(
+        fig, f"Latest Dicke cycle: {cycle.name}, {_stamp(cycle.timestamp)} (run {contents.name})"
     )
     return fig
 
@@ -143,7 +146,8 @@ def s11s(runs: Path) -> Figure:
     latest = {m.name: m for m in found}  # in order: the last of each name wins
     styles = source_styles(latest)
     fig = new_figure(5.0)
-    smith, db = fig.subplots(1, 2, width_ratios=(1, 1.25))
+    spec = grid(fig, 1, 2, SMITH_SPACE, width_ratios=(1, 1.25))
+    smith, db = fig.add_subplot(spec[0, 0]), fig.add_subplot(spec[0, 1])
     smith_grid(smith)
     for name, measurement in latest.items():
         arrays = contents.read(measurement)
@@ -153,12 +157,12 @@ def s11s(runs: Path) -> Figure:
         level = 20 * np.log10(np.maximum(np.abs(gamma), 1e-12))
         db.plot(*envelope(x, level, WIDTH_PX // 2), label=name, **styles[name])
     db.set_xlabel("frequency (MHz)")
-    db.set_ylabel(r"$|\Gamma|$ (dB)")
+    db.set_ylabel("|Γ| (dB)")
     smith.set_title("Smith chart")
     db.set_title("reflection magnitude")
-    fig.legend(loc="outside right center")
+    legend_right(fig, spec, *db.get_legend_handles_labels())
     last = max(m.timestamp for m in latest.values())
-    fig.suptitle(f"Latest S11s: run {contents.name}, to {_stamp(last)}", fontweight="bold")
+    suptitle(fig, f"Latest S11s: run {contents.name}, to {_stamp(last)}")
     return fig
 
 
@@ -204,10 +208,10 @@ def temperatures_last_day(database: MetricsDatabase | None, now: float) -> Figur
         return styled(_empty)("no temperature in the metrics database over the last day")
     fig = temperatures(log)
     hours = (log.timestamps_s[-1] - log.timestamps_s[0]) / 3600.0
-    fig.suptitle(
+    suptitle(
+        fig,
         f"Temperatures over the last day (metrics database, {hours:.1f} h of readings, "
         f"to {_stamp(float(log.timestamps_s[-1]))})",
-        fontweight="bold",
     )
     return fig
 
@@ -219,7 +223,7 @@ def current_solution(runs: Path) -> Figure:
     if newest is None or solution is None:
         return styled(_empty)("no calibration solution yet")
     fig = noise_wave_parameters(solution)
-    fig.suptitle(f"{fig.get_suptitle()}: run {newest[0].name}", fontweight="bold")
+    suptitle(fig, f"{fig.get_suptitle()}: run {newest[0].name}")
     return fig
 
 
