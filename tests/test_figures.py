@@ -65,8 +65,8 @@ def assert_laid_out(fig: Figure) -> None:
         boxes["title"] = fig._suptitle.get_window_extent(renderer)
     page = fig.bbox.padded(0.5)  # the rounding of a pixel
     for name, box in boxes.items():
-        assert page.x0 <= box.x0 and box.x1 <= page.x1, (name, box, page)
-        assert page.y0 <= box.y0 and box.y1 <= page.y1, (name, box, page)
+        assert page.x0 <= box.x0 <= box.x1 <= page.x1, (name, box, page)
+        assert page.y0 <= box.y0 <= box.y1 <= page.y1, (name, box, page)
     names = list(boxes)
     for i, a in enumerate(names):
         for b in names[i + 1:]:
