@@ -1,9 +1,9 @@
 """The status page of ``reachd --sim``, rendered by headless Chromium with live data.
 
 Debian's ``chromium`` is installed by ``.ci/run``; this test does not skip without it.
-The daemon runs the quick calibration (a solution, S11s, Dicke spectra), then a long
-wait that is still running while the page is read, with a health alarm the site raises
-on purpose (any thermocouple above -100 degC).
+The daemon runs the quick calibration (a solution, S11s, Dicke spectra, and the report
+its run leaves), then a long wait that is still running while the page is read, with a
+health alarm the site raises on purpose (any thermocouple above -100 degC).
 """
 
 import io
@@ -131,7 +131,16 @@ def test_the_page_shows_the_daemon_with_live_data_in_chromium(reachd):
             return status if job.get("id") == 2 and status.get("step") else None
 
         status = wait_for(long_running)
-        assert [j["state"] for j in client.request("queue")["jobs"]] == ["completed", "running"]
+        jobs = client.request("queue")["jobs"]
+        assert [j["state"] for j in jobs] == ["completed", "running"]
+        # The calibrating job left its report beside its run file, and said where.
+        report = Path(jobs[0]["run"]) / "report"
+        assert jobs[0]["report"] == str(report)
+        assert "## Solution" in (report / "summary.md").read_text()
+        assert (report / "parameters.png").stat().st_size > 10_000
+        events = [m["event"] for m in client.follow(1)]
+        assert events[-1]["report"] == str(report)
+        assert any(e["kind"] == "log" and e["message"].startswith("report: ") for e in events)
 
     dom = chromium("--dump-dom", url).stdout
     page = Page(dom)

@@ -85,6 +85,8 @@ def _print(event: dict[str, Any]) -> None:
         print(f"job {event.get('job')} {event['state']}{reason}")
         if event.get("run"):
             print(f"run directory: {event['run']}")
+        if event.get("report"):
+            print(f"report: {event['report']}")
 
 
 def steer(client: DaemonClient, op: str, **fields: Any) -> int:

@@ -16,7 +16,8 @@ A thin command over the run layer (:class:`~reach_receiver.run.session.RunSessio
 4. A completed run prints its checks, the solution (orders, noise scale, distance to the
    noise floor) and, with ``--sim``, the actual calibration error against the
    simulator's truth; a run that made a calibration gets its report in
-   ``<run dir>/report/`` (:mod:`reach_receiver.run.report`; ``--no-report`` skips it).
+   ``<run dir>/report/``, drawn by the run session (:mod:`reach_receiver.run.report`;
+   ``--no-report`` skips it).
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_pa
 from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
 from reach_receiver.errors import ReceiverError
 from reach_receiver.run.context import NoProgress, Progress
-from reach_receiver.run.report import write_run_report
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
 from reach_receiver.schedule.compile import ScheduleError
 from reach_receiver.schedule.timing import format_timeline, hms
@@ -162,7 +162,9 @@ def run_main(argv: Sequence[str] | None = None) -> int:
         print("reach-run: give a schedule (or --attach, --status, ...)", file=sys.stderr)
         return 2
     try:
-        session = RunSession.prepare(args.schedule, site, site.clock(), args.out)
+        session = RunSession.prepare(
+            args.schedule, site, site.clock(), args.out, report=not args.no_report
+        )
     except ScheduleError as err:
         print(f"reach-run: {args.schedule} is not valid; nothing was run:", file=sys.stderr)
         print(str(err), file=sys.stderr)
@@ -208,9 +210,9 @@ def run_main(argv: Sequence[str] | None = None) -> int:
             print(f"reach-run: the run did not start: {err}", file=sys.stderr)
             return 1
         _print_summary(summary, sim)
-        if summary.calibration is not None and summary.run_file and not args.no_report:
-            report = write_run_report(summary.run_file)
-            print(f"report: {report}" if report else "report: not written (see the log)")
+        if summary.calibration is not None and session.report:
+            written = summary.report
+            print(f"report: {written}" if written else "report: not written (see the log)")
     return 0
 
 

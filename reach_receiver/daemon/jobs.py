@@ -29,7 +29,8 @@ class Job:
     """One schedule to run, and what became of it.
 
     ``resumes`` lists the run files of earlier, interrupted runs of the same schedule that
-    this job continues (oldest first).
+    this job continues (oldest first); ``report`` is the directory of the calibration's
+    report its run left (:mod:`reach_receiver.run.report`), if any.
     """
 
     id: int
@@ -44,6 +45,7 @@ class Job:
     run: str | None = None
     reason: str = ""
     resumes: list[str] = field(default_factory=list)
+    report: str | None = None
 
     def public(self) -> dict[str, Any]:
         """The job as the control protocol shows it (without the schedule's texts)."""

@@ -40,7 +40,7 @@ from reach_receiver.errors import ConnectionLost, DeviceTimeout, ReceiverError
 from reach_receiver.monitor import Monitor
 from reach_receiver.run.instruments import Instruments
 from reach_receiver.run.resume import resumed_schedule
-from reach_receiver.run.session import RunFailed, RunSession
+from reach_receiver.run.session import RunFailed, RunSession, RunSummary
 from reach_receiver.run.steps import STANDARD_KINDS, Observe
 from reach_receiver.schedule.compile import ScheduleError, compile_text
 from reach_receiver.schedule.kinds import KindRegistry
@@ -152,7 +152,7 @@ class Daemon:
         self.session: RunSession | None = None
         self.progress: HubProgress | None = None
         self._worker: threading.Thread | None = None
-        self._finished: tuple[Job, RunFailed | None] | None = None
+        self._finished: tuple[Job, RunFailed | None, RunSummary | None] | None = None
         self._loop = threading.RLock()  # held by the main loop during each turn
         self._halt = threading.Event()
         self._halt_reason = ""
@@ -311,8 +311,9 @@ class Daemon:
         handler = HubLog(self.hub, job.id)
         logging.getLogger("reach_receiver").addHandler(handler)
         failure: RunFailed | None = None
+        summary: RunSummary | None = None
         try:
-            session.run()
+            summary = session.run()  # with the calibration's report, if it made one
         except RunFailed as err:
             failure = err
         except Exception as err:  # the run layer closed the run; record what happened
@@ -320,13 +321,13 @@ class Daemon:
             failure = RunFailed(f"{type(err).__name__}: {err}", None, "failed")
         finally:
             logging.getLogger("reach_receiver").removeHandler(handler)
-            self._finished = (job, failure)
+            self._finished = (job, failure, summary)
 
     def _collect(self) -> None:
         """Record a finished job and move the state on."""
         if self._finished is None:
             return
-        job, failure = self._finished
+        job, failure, summary = self._finished
         self._finished = None
         run = str(self.session.directory) if self.session and self.session.directory else None
         self.current, self.session, self.progress, self._worker = None, None, None, None
@@ -335,8 +336,12 @@ class Daemon:
         if state == "interrupted" and job.state == "cancelled":
             state = "cancelled"
         reason = "" if failure is None else str(failure)
-        self.queue.update(job, state=state, ended=time.time(), run=run, reason=reason)
-        self.hub.publish(job.id, "end", state=state, reason=reason, run=run)
+        report = str(summary.report) if summary is not None and summary.report else None
+        if report is not None:
+            log.info("job %d: report in %s", job.id, report)
+        self.queue.update(job, state=state, ended=time.time(), run=run, reason=reason,
+                          report=report)
+        self.hub.publish(job.id, "end", state=state, reason=reason, run=run, report=report)
         if self.machine.state == "stopping":
             return
         if failure is None or state in ("interrupted", "cancelled"):
@@ -525,7 +530,8 @@ class Daemon:
             raise ControlError(f"no job {job_id}")
         if job.state not in ("queued", "running") and not self.hub.ended(job.id):
             return iter([reply(end=True, event={"kind": "end", "state": job.state,
-                                                "reason": job.reason, "run": job.run})])
+                                                "reason": job.reason, "run": job.run,
+                                                "report": job.report})])
         events = self.hub.follow(job.id, self._halt)
         return (reply(event=e, end=e["kind"] == "end") for e in events)
 

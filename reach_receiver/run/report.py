@@ -1,10 +1,12 @@
 """The report written beside a run file that holds a calibration.
 
 After a run whose ``calibrate`` step stored a solution (``/calibration/solution``),
-:func:`write_run_report` writes the engine's report (:func:`calibration.report.write_report`:
-a PNG per figure, ``summary.md``, ``summary.html``) into ``<run dir>/report/``. Drawing is
-a convenience for the people who look: any failure is logged with its traceback and
-never fails the run, whose file is already closed.
+:class:`~reach_receiver.run.session.RunSession` (so ``reach-run`` and the daemon's jobs
+alike) calls :func:`write_run_report`, which writes the engine's report
+(:func:`calibration.report.write_report`: a PNG per figure, ``summary.md``,
+``summary.html``) into ``<run dir>/report/``. Drawing is a convenience for the people
+who look: any failure is logged with its traceback and never fails the run, whose file
+is already closed.
 """
 
 from __future__ import annotations

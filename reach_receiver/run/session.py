@@ -13,6 +13,11 @@ However a run ends (completed, a device fault, a failed check, a stop, an unexpe
 error) the front-end is put in its safe state, the temperature log is stored, the run
 file is merged with its status and reason, and the instruments are closed. A run that
 did not complete raises :class:`RunFailed` naming the step and its line.
+
+A completed run that made a calibration then gets its report, figures and summary, in
+``<run dir>/report/`` (:mod:`.report`; ``report=False`` skips it), so that ``reach-run``
+and the daemon's jobs both leave one. A report that cannot be drawn is logged and
+leaves ``RunSummary.report`` empty; it never fails the run, whose file is closed.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import contextlib
 import logging
 import os
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -50,6 +55,7 @@ from .context import (
 from .instruments import Instruments
 from .kind import RunnableKind
 from .monitoring import store_readings, watch
+from .report import write_run_report
 from .resume import carry
 from .steps import STANDARD_KINDS
 from .steps.calibrate import CalibrationOutcome
@@ -79,6 +85,8 @@ class RunSummary:
     checks: tuple[CheckRecord, ...]
     calibration: CalibrationOutcome | None
     elapsed_s: float
+    #: The report's directory (``None``: no calibration, not asked for, or it failed).
+    report: Path | None = None
 
 
 def plan(
@@ -138,6 +146,8 @@ class RunSession:
     closing: bool = False
     #: The daemon's monitor: reads at the run's safe points, its readings in the run file.
     monitor: Monitor | None = None
+    #: Draw the calibration's report after a completed run that made one.
+    report: bool = True
 
     @classmethod
     def prepare(
@@ -216,7 +226,18 @@ class RunSession:
             context.run_steps = lambda steps, scope: self._run_steps(context, steps, scope)
             if self.monitor is not None:
                 watch(self.monitor, context)
-            return self._run(context, entries, total_s)
+            summary = self._run(context, entries, total_s)
+            return self._with_report(summary)
+
+    def _with_report(self, summary: RunSummary) -> RunSummary:
+        """The summary with its report drawn, when the run made a calibration."""
+        if not self.report or summary.calibration is None or summary.run_file is None:
+            return summary
+        if self.token.requested:  # asked to stop as the run ended: do not hold it up
+            log.info("no report: %s", self.token.reason)
+            return summary
+        self.progress.update("drawing the calibration's report", 0, 1, None)
+        return replace(summary, report=write_run_report(summary.run_file))
 
     def _run(
         self, run: RunContext, entries: Sequence[TimelineEntry], total_s: float
