@@ -185,6 +185,50 @@ def test_unit_user_directories_and_command():
     assert re.search(r'^u\s+reach\s+-\s+"[^"]+"\s+/var/lib/reach\s*$', sysusers, re.M)
 
 
+#: A figure drawn and saved as calibration.figures does (Agg, no pyplot), in a new process.
+DRAW = """
+import sys
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+fig = Figure(figsize=(4, 2))
+FigureCanvasAgg(fig)
+fig.add_subplot().plot([1, 2, 3], label="a line")
+fig.legend()
+fig.savefig(sys.argv[1], format="png")
+"""
+
+
+def test_unit_gives_matplotlib_a_cache_directory_and_it_draws_silently(tmp_path):
+    service = unit_entries(UNIT)["Service"]
+    assert service["CacheDirectory"] == ["reach"]
+    environment = dict(e.partition("=")[::2] for e in service["Environment"])
+    assert environment["MPLCONFIGDIR"] == "%C/reach/matplotlib"  # %C: /var/cache
+    # As systemd starts the service: the cache directory made, MPLCONFIGDIR inside it,
+    # and a home that cannot be written (its parent is a file).
+    (tmp_path / "cache" / "reach").mkdir(parents=True)
+    (tmp_path / "file").touch()
+    base = {k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "MPL"))}
+    base["HOME"] = str(tmp_path / "file" / "home")
+    unit_env = {**base, "MPLCONFIGDIR": environment["MPLCONFIGDIR"].replace(
+        "%C", str(tmp_path / "cache"))}
+
+    def draw(env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-W", "error", "-c", DRAW, str(tmp_path / "figure.png")],
+            capture_output=True, text=True, timeout=120, check=False, env=env, cwd=ROOT,
+        )
+
+    drawn = draw(unit_env)  # the first start: the font cache is built
+    assert drawn.returncode == 0, drawn.stderr
+    assert drawn.stderr == ""  # no warning, logged or raised
+    assert list((tmp_path / "cache" / "reach" / "matplotlib").glob("fontlist-*.json"))
+    assert (tmp_path / "figure.png").stat().st_size > 1000
+    # Without the setting, the same home makes matplotlib warn (what the setting avoids).
+    unset = draw(base)
+    assert unset.returncode == 0, unset.stderr
+    assert "MPLCONFIGDIR" in unset.stderr
+
+
 def test_unit_sandbox_keeps_the_instruments_reachable():
     service = unit_entries(UNIT)["Service"]
     one = {key: values[-1] for key, values in service.items()}
