@@ -51,6 +51,8 @@ LEVELS = {"unc": 250.0, "cos": 190.0, "sin": 90.0, "NS": 1116.0, "L": 300.0}
 FOUR_LOADS = ("cold", "hot", "c10open", "c10short")
 WIDTH = ITPM_CHANNEL_WIDTH_HZ * 8  # 820 channels: the same physics, faster runs
 Truth = dict[str, list[float]]
+#: Terms of a "smooth" truth (constant included): beyond any order the search reaches.
+SMOOTH_TERMS = 12
 
 
 def _old(data: CalibrationData) -> Solution:
@@ -77,12 +79,13 @@ class Ensemble:
     calibrators: tuple[str, ...] = REACH_CALIBRATORS
     integration_s: float = 600.0
     vna_sigma: float = 0.0
-    truths: str = "random"  # "reach", "weak" or "random"
+    truths: str = "random"  # "reach", "weak", "random" or "smooth"
+    channel_width_hz: float = WIDTH
 
     def config(self, truth: Truth | None) -> SimulationConfig:
         """The simulator's set-up for one truth."""
         return SimulationConfig(
-            channel_width_hz=WIDTH, integration_s=self.integration_s,
+            channel_width_hz=self.channel_width_hz, integration_s=self.integration_s,
             calibrators=self.calibrators, vna_sigma=self.vna_sigma, truth_coefficients=truth,
         )
 
@@ -94,6 +97,7 @@ ENSEMBLES = (
     Ensemble("random truths, 12 cal, 30 s, VNA noise 1e-3", integration_s=30.0, vna_sigma=1e-3),
     Ensemble("random truths, 8 cal, 2 min", REACH_CALIBRATORS[:8], integration_s=120.0),
     Ensemble("random truths, 4 EDGES loads, 1 h", FOUR_LOADS, integration_s=3600.0),
+    Ensemble("smooth truths, 12 cal, 10 min", truths="smooth"),
 )
 
 
@@ -120,6 +124,14 @@ def draw_truth(
         return None
     truth: Truth = {}
     for k, level in LEVELS.items():
+        if ensemble.truths == "smooth":
+            # Every term present, falling geometrically (an analytic function's Legendre
+            # coefficients): no order is the true one.
+            first = np.exp(rng.uniform(np.log(3.0), np.log(300.0))) * sd[k][1]
+            rho = rng.uniform(0.2, 0.6)
+            terms = first * rho ** np.arange(SMOOTH_TERMS - 1)
+            truth[k] = [level, *(rng.choice([-1.0, 1.0], size=terms.size) * terms)]
+            continue
         if ensemble.truths == "weak":
             n, z = 3, np.array([30.0, rng.uniform(2.0, 6.0)])
         else:

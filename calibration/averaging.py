@@ -39,6 +39,10 @@ FloatArray = NDArray[np.float64]
 MASS = 0.999
 #: ...and at most this many.
 MAX_COMPONENTS = 64
+#: Prior probability that the parameters are smooth functions with every term up to the
+#: search box's edge rather than polynomials of some order (:func:`with_smooth_hypothesis`):
+#: even odds, stating no preference.
+SMOOTH_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,40 @@ class MixturePosterior(LinearPosterior):
         for component, weight in zip(self.components, self.weights, strict=True):
             totals[component.orders] = totals.get(component.orders, 0.0) + float(weight)
         return dict(sorted(totals.items(), key=lambda item: -item[1]))
+
+
+def with_smooth_hypothesis(
+    grids: Mapping[Orders, FloatArray],
+    full: Orders,
+    n_models: int,
+    smooth_share: float = SMOOTH_SHARE,
+) -> dict[Orders, FloatArray]:
+    """The evaluated models' log evidence grids plus the log of their prior probability.
+
+    Two hypotheses about the receiver, at odds ``smooth_share : 1 - smooth_share``:
+
+    * **polynomials**: each parameter is a polynomial of some order, every combination of
+      orders in the search box (``n_models`` of them) equally likely;
+    * **smooth functions**: every parameter has every term up to the box's edge (``full``),
+      none exactly zero, held in by the hierarchical prior's decay (an analytic
+      function's Legendre coefficients fall geometrically but do not stop).
+
+    The first is what the order search explores; alone it charges a term the data only
+    half see an Occam factor that drops it, and the bias it leaves is outside the error
+    bars (measured: 57/84 % coverage of 68/95 % intervals where a third of the terms sit
+    below 2 sigma). The second keeps every term, shrunk, with its variance. The data weigh
+    the two through the evidence: a receiver whose higher terms are exactly zero favours
+    the polynomials by tens of nats (the REACH-like simulation: 30 nats, the order choice
+    unchanged), one with many weak terms the smooth functions by a few.
+    ``p(m) = (1 - s) / n_models`` for every model of the box and ``s`` more for ``full``.
+    """
+    polynomial = np.log1p(-smooth_share) - np.log(n_models)
+    out = {m: np.asarray(grid, dtype=float) + polynomial for m, grid in grids.items()}
+    if full in out:
+        out[full] = np.asarray(grids[full], dtype=float) + np.logaddexp(
+            polynomial, np.log(smooth_share)
+        )
+    return out
 
 
 def select_components(

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .averaging import mixture_posterior, select_components
+from .averaging import mixture_posterior, select_components, with_smooth_hypothesis
 from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior, solve
 from .errors import IllPosedError
 from .normal_equations import NormalEquations
@@ -86,6 +86,7 @@ def fit(
     starts: Sequence[Orders] = (),
     average: bool = True,
     skipped: dict[Orders, str] | None = None,
+    smooth: bool = True,
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """Posterior of the chosen (or evidence-best) model and the evidence table.
 
@@ -95,11 +96,14 @@ def fit(
     :class:`ShrinkagePrior`, ``average`` mixes the models that carry the weight; without
     it, only the best model's prior scales. Models the search had to pass over (no
     finite evidence) are recorded in ``skipped`` with the reason, and do not stop it.
+    ``smooth`` offers the averaged search the smooth-function hypothesis
+    (:func:`~calibration.averaging.with_smooth_hypothesis`) when the data constrain it.
     """
     skipped = {} if skipped is None else skipped
     if isinstance(prior, ShrinkagePrior):
         return _fit_shrinkage(
-            normal, choice, prior, scale_prior, allow_prior_dominated, starts, average, skipped
+            normal, choice, prior, scale_prior, allow_prior_dominated, starts, average, skipped,
+            smooth,
         )
 
     def posterior(orders: Orders) -> LinearPosterior:
@@ -142,6 +146,7 @@ def _fit_shrinkage(
     starts: Sequence[Orders],
     average: bool,
     skipped: dict[Orders, str],
+    smooth: bool = True,
 ) -> tuple[LinearPosterior, dict[Orders, float]]:
     """:func:`fit` with the prior scale marginalised (or fitted per parameter), averaged."""
     grids: dict[Orders, np.ndarray] = {}
@@ -182,9 +187,28 @@ def _fit_shrinkage(
         best, table = result.best, result.table
     if not np.isfinite(table[best]):
         raise IllPosedError("no model between the order limits is constrained by the data")
-    pool = grids if average else {best: grids[best]}
+    pool: dict[Orders, np.ndarray] = dict(grids) if average else {best: grids[best]}
+    offered = smooth and average and choice.orders is None
+    if offered and _constrained(normal, choice.max_orders):
+        # The smooth-function hypothesis (averaging.with_smooth_hypothesis), offered only
+        # where the data alone constrain every term of it, as fixed orders must be.
+        full = choice.max_orders
+        if full not in grids:
+            log_evidence(full)
+            table.pop(full, None)  # scored for the mixture, not a step of the search
+        box = int(np.prod([hi - lo + 1 for lo, hi in zip(
+            choice.min_orders, choice.max_orders, strict=True)]))
+        pool = with_smooth_hypothesis(grids, full, box)
     components = select_components(pool)
     return mixture_posterior(normal, components, widths, scale_prior, table[best]), table
+
+
+def _constrained(normal: NormalEquations, orders: Orders) -> bool:
+    try:
+        check_constrained(normal, orders)
+    except IllPosedError:
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -217,12 +241,14 @@ def fit_extending(
     scale_prior: ScalePrior | None,
     allow_prior_dominated: bool = False,
     average: bool = True,
+    smooth: Callable[[], bool] = lambda: True,
 ) -> FitResult:
     """:func:`fit` on ``build(max_orders)``, raising limits the evidence runs into.
 
     ``build`` makes the normal equations for given largest orders (the solvers' likelihood).
     With a :class:`ShrinkagePrior` the evidence table is that of the last normal
-    equations alone, so that every entry is computed the same way.
+    equations alone, so that every entry is computed the same way. ``smooth()``, asked
+    after each ``build``, says whether the smooth-function hypothesis may join (:func:`fit`).
     """
     from .noise_waves import PARAMETERS
 
@@ -242,6 +268,7 @@ def fit_extending(
             starts=best,
             average=average,
             skipped=skipped,
+            smooth=smooth(),  # asked after build(): it may depend on the new equations
         )
         if isinstance(prior, ShrinkagePrior):
             table = dict(part)

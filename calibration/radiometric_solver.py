@@ -199,9 +199,15 @@ def solve_radiometric(
             normal = _normal_equations(problem, b, largest, ridge(largest), offset_var)
         return normal
 
+    # Whether the largest model's fit keeps T_NS positive: only then may it join the
+    # average as the smooth-function hypothesis (a model that takes T_NS through zero is
+    # unphysical there, and it is what the fallback below steps around).
+    largest_physical = [True]
+
     def operating_point(normal: NormalEquations, b: FloatArray, largest: Orders) -> FloatArray:
         theta = evaluate_coefficients(normal.reference, b, largest)
-        if np.all(theta[INDEX["NS"]] > 0):
+        largest_physical[0] = bool(np.all(theta[INDEX["NS"]] > 0))
+        if largest_physical[0]:
             return theta
         # Few calibrators leave the largest model free to take T_NS through zero where the
         # data pin it weakly; the evidence's models, fitted on the same equations, are the
@@ -209,14 +215,15 @@ def solve_radiometric(
         within = choice if choice.orders is not None else replace(choice, max_orders=largest)
         post, _ = fit(
             normal, within, coefficient_prior, 1.0, prior.scale, allow_prior_dominated,
-            average=average,
+            average=average, smooth=False,
         )
         theta = evaluate_coefficients(post.mean, b, post.orders)
         require_positive_ns(theta[INDEX["NS"]], data)
         return theta
 
     result = fit_extending(
-        build, choice, coefficient_prior, 1.0, prior.scale, allow_prior_dominated, average
+        build, choice, coefficient_prior, 1.0, prior.scale, allow_prior_dominated, average,
+        smooth=lambda: largest_physical[0],
     )
     posterior, table = result.posterior, result.table
     metadata: dict[str, object] = dict(result.limits_metadata())

@@ -99,7 +99,7 @@ def test_reflection_errors_round_trip_and_follow_a_channel_selection(tmp_path, r
     assert read_run(tmp_path / "run.h5")[0].sources["hot"].gamma_std is None
     mask = np.arange(n) % 3 == 0
     np.testing.assert_array_equal(back.select(mask).gamma_rec_std, rec_std[mask])
-    with pytest.raises(InvalidDataError, match="receiver.*>= 0"):
+    with pytest.raises(InvalidDataError, match=r"receiver.*>= 0"):
         replace(data, gamma_rec_std=-rec_std)
 
 

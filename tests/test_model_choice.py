@@ -14,7 +14,7 @@ import itertools
 import numpy as np
 import pytest
 
-from calibration.averaging import MixturePosterior
+from calibration.averaging import MixturePosterior, with_smooth_hypothesis
 from calibration.conjugate import CoefficientPrior, ScalePrior, solve
 from calibration.errors import IllPosedError
 from calibration.model_fit import OrderChoice
@@ -29,6 +29,7 @@ from calibration.shrinkage import (
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 COARSE = ITPM_CHANNEL_WIDTH_HZ * 8  # 820 channels: the same physics, faster runs
+RANDOM_RUNS = 60
 
 
 def normal_equations_of(data, largest=(6, 6, 6, 6, 6)):
@@ -205,3 +206,48 @@ def test_fixed_orders_and_the_single_best_model_stay_available():
     single = solve_radiometric(run.data, average=False)
     assert single.orders == single.best_orders
     assert single.models_line() == ""
+
+
+def test_the_smooth_hypothesis_prior_splits_the_odds():
+    """Polynomials share 1 - s over the box's models; the full model gets s more."""
+    grids = {(1, 1, 1, 1, 1): np.zeros(3), (2, 2, 2, 2, 2): np.zeros(3)}
+    priored = with_smooth_hypothesis(grids, (2, 2, 2, 2, 2), n_models=32, smooth_share=0.25)
+    np.testing.assert_allclose(np.exp(priored[(1, 1, 1, 1, 1)]), 0.75 / 32)
+    np.testing.assert_allclose(np.exp(priored[(2, 2, 2, 2, 2)]), 0.75 / 32 + 0.25)
+
+
+def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
+    """An ensemble of truths: each parameter with 1-6 terms, each higher term's size
+    log-uniform from 0.3 to 30 of its posterior sd, so that a third of them sit below two
+    sigma, where the evidence of polynomials alone drops them (the single best model
+    covered 54 %/82 % of its 68 %/95 % intervals over 40 such runs of the model-choice
+    benchmark). With the smooth-function hypothesis in the average the 68 % intervals
+    cover at the nominal rate; the 95 % intervals still fall short (90 % here, 92 % in the
+    benchmark, whose oracle with the true orders fixed reaches 93 %): their tails are where
+    the shared decay of the hierarchical prior misjudges a parameter's weak terms.
+    60 seeded runs at 205 channels, 8 channels each; tolerances about two binomial sigma
+    of the correlated channels.
+    """
+    from benchmarks.model_choice import Ensemble, draw_truth, pilot_sd
+
+    # The benchmark's ensemble at a quarter of its channels (sizes in the sd of these).
+    ensemble = Ensemble("random truths, 205 channels", channel_width_hz=COARSE * 4)
+    sd = pilot_sd(ensemble)
+    rng = np.random.default_rng(2026)
+    hits = {"best": [], "averaged": []}
+    for _ in range(RANDOM_RUNS):
+        run = simulate_run(ensemble.config(draw_truth(ensemble, sd, rng)), rng=rng)
+        f, gr, truth = run.data.freq_hz, run.data.gamma_rec, run.validation_temperature_k
+        channels = np.linspace(0, f.size - 1, 8).astype(int)
+        for name, average in (("best", False), ("averaged", True)):
+            calibrated = solve_radiometric(run.data, average=average).calibrate(
+                f, gr, run.validation_noiseless
+            )
+            z = np.abs((calibrated.mean - truth) / calibrated.std_calibration)[channels]
+            hits[name].append([np.mean(z < 1.0), np.mean(z < 1.96)])
+    best, averaged = np.mean(hits["best"], axis=0), np.mean(hits["averaged"], axis=0)
+    print(f"best {best}, averaged {averaged}")
+    assert best[0] < 0.62, best
+    assert abs(averaged[0] - 0.68) <= 0.05, averaged
+    assert averaged[1] >= 0.88, averaged
+    assert averaged[1] - best[1] >= 0.05, (averaged, best)
