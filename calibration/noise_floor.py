@@ -18,6 +18,8 @@ Where the run states the VNA's random errors (the sources' ``gamma_std``, the re
 ``gamma_rec_std``), they are noise of the data too: each row's variance gains their
 part (:mod:`calibration.reflection_noise`, as the solver's rows do), and the source's
 own per-channel part, which no estimator of smooth parameters removes, adds to its bound.
+The calibrators' stated temperature uncertainties (``temperature_std_k``) are marginalised
+as the solver marginalises them (one offset per source).
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ def noise_floor(
         basis,
         orders,
         reference=parameters.coefficients,
+        offset_variance=offsets if np.any(offsets := data.temperature_variances()) else None,
     )
     chol, _ = cho_factor(normal.gram, lower=True)
     src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
