@@ -6,6 +6,7 @@ from sites import DEVICES, planning_site
 
 from reach_receiver.config.corrections import CableSettings, CorrectionSettings
 from reach_receiver.config.site import SiteError, load_site, parse_site
+from reach_receiver.store.corrections import corrections_line
 
 
 def test_corrections_survive_the_site_file_round_trip():
@@ -40,3 +41,13 @@ def test_a_cable_without_its_thermocouple_or_with_two_models_is_refused_with_its
     assert "calibration.cables.hot.thermocouple: missing required key" in text
     assert "calibration.cables.c2r27.s2p: give a measured two-port or a data-sheet" in text
     assert "calibration.rfi: must be true or false" in text
+
+
+def test_the_run_summary_says_what_the_corrections_did():
+    report = {"mts_sources": "mts.s2p", "cable_mean_change_k": {"c10open": -3.981},
+              "rfi_flagged_channels": 5, "warnings": ["hot: no reading of its cable's port 3"]}
+    assert corrections_line(report) == (
+        "sources de-embedded through mts.s2p; cable temperatures (c10open -3.981 K); "
+        "5 RFI channels flagged; warning: hot: no reading of its cable's port 3"
+    )
+    assert corrections_line({}) == ""

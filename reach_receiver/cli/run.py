@@ -41,6 +41,8 @@ from reach_receiver.run.context import NoProgress, Progress
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
 from reach_receiver.schedule.compile import ScheduleError
 from reach_receiver.schedule.timing import format_timeline, hms
+from reach_receiver.sim.effects import SimEffects
+from reach_receiver.sim.physics import PhysicsConfig
 from reach_receiver.sim.receiver import (
     DEFAULT_COMPRESSION,
     SimulatedReceiver,
@@ -48,6 +50,7 @@ from reach_receiver.sim.receiver import (
     simulated_site,
     spectrum_period_for,
 )
+from reach_receiver.store.corrections import corrections_line
 
 from . import remote
 from .display import PlainProgress, RichProgressDisplay
@@ -97,6 +100,13 @@ def parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
     p.add_argument(
+        "--effects",
+        action="store_true",
+        help="--sim: an MTS two-port, cables warmer at one end, a cable-cooled hot load, RFI "
+        "spikes (reach_receiver.sim.effects); the simulated site describes their corrections, "
+        "which the calibrate step applies",
+    )
+    p.add_argument(
         "--no-report",
         action="store_true",
         help="do not draw the calibration's report (figures, summary) into <run dir>/report/",
@@ -139,6 +149,7 @@ def run_main(argv: Sequence[str] | None = None) -> int:
         compression=args.compression,
         spectrum_period_s=args.spectrum_period or spectrum_period_for(args.compression),
         seed=args.seed,
+        physics=PhysicsConfig(effects=SimEffects.all() if args.effects else SimEffects()),
     )
     try:
         site = simulated_site(settings) if args.sim else load_site(find_site(args.site))
@@ -301,6 +312,8 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
         f"{len(handover.calibrators)} calibrators, {cycles} Dicke cycles, "
         f"{len(handover.s11)} S11s (recorded in the run file)"
     )
+    if corrections_line(handover.corrections):
+        print(f"  corrections: {corrections_line(handover.corrections)}")
     print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
     if solution.models_line():
         print(f"  averaged over models (orders, weight): {solution.models_line()}")

@@ -180,3 +180,19 @@ def correct(
     if chosen.rfi and settings.rfi:
         data, others = _rfi(data, others, report)
     return data, others, report
+
+
+def corrections_line(report: dict[str, Any] | Any) -> str:
+    """One line of what :func:`correct` did (its ``report``), empty if it did nothing."""
+    parts = []
+    if report.get("mts_sources"):
+        parts.append(f"sources de-embedded through {report['mts_sources']}")
+    if report.get("mts_lna"):
+        parts.append(f"LNA reflection embedded through {report['mts_lna']}")
+    if report.get("cable_mean_change_k"):
+        changes = ", ".join(f"{k} {v:+.3f} K" for k, v in report["cable_mean_change_k"].items())
+        parts.append(f"cable temperatures ({changes})")
+    if "rfi_flagged_channels" in report:
+        parts.append(f"{report['rfi_flagged_channels']} RFI channels flagged")
+    parts += [f"warning: {w}" for w in report.get("warnings", [])]
+    return "; ".join(parts)
