@@ -1,0 +1,85 @@
+"""What the daemon does when something went wrong: a front-end, a job interrupted.
+
+* The front-end goes to its safe state through the Teensy alone (:meth:`_go_safe`) at
+  start, after an abort, and as the test of a link that failed: the daemon then tries
+  again with a growing back-off (:data:`BACKOFF_S`) and leaves ``faulted`` by itself
+  once the front-end answers.
+* At start, the runs a crash left open are closed (:mod:`.recovery`) and the jobs that
+  were running are marked interrupted; with the site's ``resume`` policy their
+  continuation is queued first, as it is for a job whose link failed.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+from reach_receiver.errors import ReceiverError
+from reach_receiver.run.instruments import Instruments
+from reach_receiver.store import RUN_FILE
+
+from .base import DaemonBase
+from .jobs import Job
+from .recovery import recover_run, recover_runs
+
+log = logging.getLogger(__name__)
+
+#: Back-off of the attempts to reach a front-end that stopped answering (s of real time).
+BACKOFF_S = (1.0, 2.0, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0)
+
+
+class FaultHandling(DaemonBase):
+    """The front-end's safe state and its retries; recovery of interrupted jobs."""
+
+    def _go_safe(self) -> None:
+        """Put the front-end in its safe state through the Teensy alone, and let it go."""
+        with self.monitor.hardware():
+            state = Instruments.from_site(self.site, self.clock).make_safe()
+        log.info("front-end safe: %s", " ".join(f"{k}={v}" for k, v in state.as_pins().items()))
+
+    def _link_failed(self, reason: str, job: Job | None = None) -> None:
+        self.alarms["link"] = reason
+        delay = BACKOFF_S[min(self._retries, len(BACKOFF_S) - 1)]
+        self._retry_at = time.monotonic() + delay
+        self._retries += 1
+        if self.machine.state == "starting":
+            self.machine.go("faulted", reason)
+        log.error("%s; trying the front-end again in %g s", reason, delay)
+        if job is not None and self.site.daemon.resume and job.run:
+            self._queue_resumption(job, Path(job.run) / RUN_FILE)
+
+    def _retry_front_end(self) -> None:
+        try:
+            self._go_safe()
+        except (ReceiverError, OSError) as err:
+            self._link_failed(f"front-end still unreachable: {err}")
+            return
+        log.warning("front-end answers again after %d attempts", self._retries)
+        self.alarms.pop("link", None)
+        self._retry_at, self._retries = None, 0
+        if self.machine.state == "faulted" and "run" not in self.alarms:
+            self.machine.go("idle", "the front-end answers again")
+
+    def _recover(self) -> None:
+        """Close runs left open; jobs that were running are interrupted (and resumed)."""
+        recovered = {r.directory: r for r in recover_runs(self.dirs.runs)}
+        for job in self.queue.jobs("running"):
+            directory = Path(job.run) if job.run else None
+            found = recovered.get(directory) if directory else None
+            if directory is not None and found is None:
+                found = recover_run(directory)
+            reason = found.reason if found else "the daemon stopped before the run began"
+            self.queue.update(job, state="interrupted", ended=time.time(), reason=reason)
+            log.warning("job %d was running when the daemon stopped: %s", job.id, reason)
+            if self.site.daemon.resume and directory is not None:
+                self._queue_resumption(job, directory / RUN_FILE)
+
+    def _queue_resumption(self, job: Job, run_file: Path) -> None:
+        if not run_file.exists():
+            return
+        resumption = self.queue.add(
+            job.name, job.schedule, job.files, f"resumption of job {job.id}", time.time(),
+            resumes=[*job.resumes, str(run_file)], first=True,
+        )
+        log.warning("job %d resumes job %d from %s", resumption.id, job.id, run_file)
