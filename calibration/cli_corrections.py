@@ -10,8 +10,8 @@ In this order, before the solve: ``--band`` keeps the channels in ``LO-HI`` MHz;
 ``--mask-band`` drops those in a band of known interference (repeatable;
 :func:`calibration.preparation.excision_flags`); ``--rfi`` flags spikes in each
 calibrator's load and noise-source spectra (:func:`calibration.rfi.flag_spectrum`, 5
-sigma; not yet the source position's, see :func:`_rfi_flags`) and drops the channels
-flagged in any of them from every calibrator, saying how many per source;
+sigma; not yet the source position's, see :func:`calibration.rfi.calibrator_flags`) and
+drops the channels flagged in any of them from every calibrator, saying how many per source;
 ``--smooth-s11 P`` replaces every reflection (calibrators' and the receiver's) by the
 smoothing spline of factor ``P`` (:func:`calibration.preparation.smooth_reflection`,
 frequency in MHz; its kernel width is printed). What was dropped is counted in the
@@ -39,7 +39,7 @@ from .errors import CalibrationError
 from .measurement_uncertainty import check_noise_source
 from .noise_waves import INDEX
 from .preparation import excision_flags, smooth_reflection, smoothing_width_hz
-from .rfi import flag_spectrum
+from .rfi import calibrator_flags
 from .simulate import NC346A_ENR_DB
 from .solution import Solution
 
@@ -126,24 +126,6 @@ def _keep(data: CalibrationData, keep: BoolArray, what: str) -> CalibrationData:
     return data.select(keep, what)
 
 
-def _rfi_flags(data: CalibrationData) -> tuple[BoolArray, dict[str, int]]:
-    """Union of the spike flags of every calibrator's load and noise-source spectra.
-
-    Not the source position's: the 10 m cable sources ripple by tens of percent every few
-    MHz, which :func:`calibration.rfi.flag_spectrum`'s trend (a polynomial times a running
-    median) does not follow, so it flags 35-40 % of their channels in a clean simulated run.
-    """
-    union = np.zeros(data.n_channels, dtype=bool)
-    counts = {}
-    for name, source in data.sources.items():
-        flags = np.zeros(data.n_channels, dtype=bool)
-        for spectrum in (source.p_load, source.p_ns):
-            flags |= flag_spectrum(spectrum)
-        counts[name] = int(np.count_nonzero(flags))
-        union |= flags
-    return union, counts
-
-
 def prepare(
     data: CalibrationData, args: argparse.Namespace
 ) -> tuple[CalibrationData, list[str], dict[str, Any]]:
@@ -165,7 +147,7 @@ def prepare(
         meta["masked_bands_mhz"] = [list(b) for b in args.mask_band]
         meta["masked_channels"] = int(np.count_nonzero(masked))
     if args.rfi:
-        flagged, counts = _rfi_flags(data)
+        flagged, counts = calibrator_flags(data)
         n = data.n_channels
         data = _keep(data, ~flagged, "--rfi")
         per_source = ", ".join(f"{k} {v}" for k, v in counts.items())

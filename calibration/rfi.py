@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import binary_dilation, label, median_filter
 
+from .data import CalibrationData
 from .errors import InvalidDataError
 
 __all__ = ["RfiFlags", "flag_dynamic_spectrum", "flag_spectrum", "robust_sigma"]
@@ -210,3 +211,22 @@ def flag_dynamic_spectrum(
         spikes, bursts, lines = new_spikes, new_bursts, new_lines
     union = given | spikes | bursts | lines
     return RfiFlags(np.asarray(union), spikes & ~given, bursts & ~given, lines & ~given)
+
+
+def calibrator_flags(data: CalibrationData) -> tuple[BoolArray, dict[str, int]]:
+    """Union of the spike flags of every calibrator's load and noise-source spectra.
+
+    Not the source position's: the 10 m cable sources ripple by tens of percent every few
+    MHz, which :func:`flag_spectrum`'s trend (a polynomial times a running median) does
+    not follow, so it flags 35-40 % of their channels in a clean simulated run. Returns
+    the flags and the number of channels each calibrator's spectra flagged.
+    """
+    union = np.zeros(data.n_channels, dtype=bool)
+    counts = {}
+    for name, source in data.sources.items():
+        flags = np.zeros(data.n_channels, dtype=bool)
+        for spectrum in (source.p_load, source.p_ns):
+            flags |= flag_spectrum(spectrum)
+        counts[name] = int(np.count_nonzero(flags))
+        union |= flags
+    return union, counts
