@@ -30,7 +30,7 @@ from calibration.model_fit import OrderChoice  # noqa: E402
 from calibration.noise_floor import noise_floor  # noqa: E402
 from calibration.noise_waves import PARAMETERS, design_terms  # noqa: E402
 from calibration.radiometric_solver import solve_radiometric  # noqa: E402
-from calibration.rfi import calibrator_flags  # noqa: E402
+from calibration.rfi import calibrator_flags, flag_spectrum  # noqa: E402
 from calibration.thesis_solver import solve_thesis  # noqa: E402
 
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "edges3-2022-316"
@@ -193,9 +193,10 @@ def corrections_table(directory: Path) -> None:
     needs (no MTS, no cable-fed sources, a lab). Both columns are set against the
     best-known temperatures (the hot load's with the cable's loss): the uncorrected solver
     is trained on the hot load's thermistor reading, 0.15-0.30 K warmer than what the
-    receiver sees. The RFI flagger (:func:`calibration.rfi.calibrator_flags`) is run and
-    its count printed, not applied: on these 450-cycle averages, smoothed over channels,
-    its trend-and-MAD noise model does not hold and it flags most channels.
+    receiver sees. RFI: the files hold calibrated T* spectra, so the loads' reference and
+    noise-source spectra are constants and :func:`calibration.rfi.calibrator_flags` finds
+    nothing in them; the matched loads' own spectra are searched instead and the count is
+    printed (the lab is shielded; at 5 sigma Gaussian noise alone flags almost nothing).
     """
     raw = et.load_edges3_run(directory, hot_load_loss=False)
     lossy = et.load_edges3_run(directory)
@@ -214,7 +215,9 @@ def corrections_table(directory: Path) -> None:
     for name in lossy.names:
         print(f"{name:6s} {errors['none'][name]:10.4f} {errors['hot cable'][name]:10.4f}")
     flags, _ = calibrator_flags(lossy)
-    print(f"RFI flagger (not applied): {int(flags.sum())} of {flags.size} channels flagged")
+    own = {n: int(flag_spectrum(lossy.sources[n].p_source).sum()) for n in ("amb", "hot")}
+    print(f"RFI: {int(flags.sum())} channels flagged in the reference and noise-source "
+          f"spectra (constants here), {own} in the matched loads' own of {flags.size}")
 
 
 if __name__ == "__main__":

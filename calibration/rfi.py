@@ -107,6 +107,8 @@ def flag_spectrum(
     for _ in range(max_iterations):
         r = x / _trend(x, current, window, degree) - 1
         sigma = robust_sigma(r[~current])
+        if not sigma > 0:  # no noise (a constant or a model spectrum): nothing stands out
+            break
         new = current | (r > threshold * sigma)
         if np.array_equal(new, current):
             break

@@ -141,3 +141,12 @@ def test_bad_input_is_refused():
         flag_spectrum(np.ones(100), np.ones(100, bool))
     with pytest.raises(InvalidDataError, match=">= 3 spectra"):
         flag_dynamic_spectrum(np.ones((2, 100)))
+
+
+def test_a_spectrum_without_noise_flags_nothing():
+    """A constant or model spectrum (EDGES-3's files hold T*; their load and noise-source
+    powers are constants) has no noise to judge a spike against: nothing is flagged, where
+    a zero scale once flagged rounding residuals and then, iterating, 85 % of the band."""
+    assert not flag_spectrum(np.full(2868, 300.0)).any()
+    smooth = 300.0 * (1 + 0.1 * np.linspace(-1, 1, 2868) ** 2)
+    assert not flag_spectrum(smooth).any()
