@@ -35,7 +35,7 @@ from .noise_waves import design_terms
 from .normal_equations import build_normal_equations
 from .polynomial_model import PolynomialParameters, design_rows
 from .radiometric_solver import linearise
-from .reflection_noise import receiver_temperature_variance, temperature_variance
+from .reflection_noise import reflection_variance
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -75,7 +75,7 @@ def noise_floor(
     terms = data.terms()
     noiseless_q = np.asarray((temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float)
     gammas = np.stack([s.gamma for s in data.sources.values()])
-    extra = _reflection_variance(
+    extra = reflection_variance(
         theta[:, None, :], gammas, data.gamma_rec, noiseless_q, data.reflection_errors(),
         data.gamma_rec_std,
     )
@@ -93,25 +93,8 @@ def noise_floor(
     src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
     src_rows = design_rows(src_terms.matrix(source.q), basis, orders)
     z = solve_triangular(chol, src_rows.T, lower=True)
-    direct = _reflection_variance(
+    direct = reflection_variance(
         theta, source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec, source.q,
         source.gamma_std, data.gamma_rec_std,
     )
     return NoiseFloor(freq, np.sqrt(np.sum(z**2, axis=0) + direct))
-
-
-def _reflection_variance(
-    theta: FloatArray,
-    gamma: ComplexArray,
-    gamma_rec: ComplexArray,
-    q: FloatArray,
-    gamma_std: FloatArray | float | None,
-    gamma_rec_std: FloatArray | float | None,
-) -> FloatArray | float:
-    """Temperature variance from the stated reflection errors (0 where none is stated)."""
-    out: FloatArray | float = 0.0
-    if gamma_std is not None:
-        out = out + temperature_variance(theta, gamma, gamma_rec, q, gamma_std)
-    if gamma_rec_std is not None:
-        out = out + receiver_temperature_variance(theta, gamma, gamma_rec, q, gamma_rec_std)
-    return out

@@ -60,7 +60,7 @@ from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
-from .reflection_noise import receiver_temperature_variance, temperature_variance
+from .reflection_noise import reflection_variance
 from .shrinkage import ShrinkagePrior
 from .solution import Solution
 
@@ -186,15 +186,9 @@ def solve_radiometric(
         normal = _normal_equations(start, b, largest, ridge(largest))
         for _ in range(iterations):
             theta = operating_point(normal, b, largest)
-            extra: FloatArray | float = 0.0
-            if gamma_std is not None:
-                extra = temperature_variance(
-                    theta[:, None, :], gammas, data.gamma_rec, q, gamma_std
-                )
-            if data.gamma_rec_std is not None:
-                extra = extra + receiver_temperature_variance(
-                    theta[:, None, :], gammas, data.gamma_rec, q, data.gamma_rec_std
-                )
+            extra = reflection_variance(
+                theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
+            )
             problem = linearise(terms, temps, q, var_q, theta, extra)
             normal = _normal_equations(problem, b, largest, ridge(largest), offset_var)
         return normal

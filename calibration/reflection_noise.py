@@ -78,6 +78,23 @@ def receiver_temperature_variance(
     return _variance(temperature, gamma_rec_std)
 
 
+def reflection_variance(
+    theta: FloatArray,
+    gamma: ArrayLike,
+    gamma_rec: ArrayLike,
+    q: ArrayLike,
+    gamma_std: ArrayLike | None,
+    gamma_rec_std: ArrayLike | None,
+) -> FloatArray | float:
+    """Both errors' ``var_T`` (K^2) added (independent sweeps); 0 where neither is known."""
+    out: FloatArray | float = 0.0
+    if gamma_std is not None:
+        out = out + temperature_variance(theta, gamma, gamma_rec, q, gamma_std)
+    if gamma_rec_std is not None:
+        out = out + receiver_temperature_variance(theta, gamma, gamma_rec, q, gamma_rec_std)
+    return out
+
+
 def _variance(temperature: Callable[[complex], FloatArray], std: ArrayLike) -> FloatArray:
     """``(J_re^2 + J_im^2) sigma^2 / 2`` with ``J`` by central differences of ``temperature``."""
 

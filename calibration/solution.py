@@ -30,7 +30,7 @@ from .data import SourceData, check_source
 from .errors import InvalidDataError
 from .noise_waves import INDEX, PARAMETERS, design_terms
 from .polynomial_model import Orders, PolynomialParameters, coefficient_slices, design_rows
-from .reflection_noise import receiver_temperature_variance, temperature_variance
+from .reflection_noise import reflection_variance
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -202,17 +202,12 @@ class Solution:
             t_ns = self.evaluate(freq)[INDEX["NS"]]
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * t_ns) * np.sqrt(post.noise_variance * var_q)
-        if source.gamma_std is not None:
-            var_gamma = temperature_variance(
-                self.evaluate(freq), source.gamma, gamma_rec, source.q, source.gamma_std
+        if source.gamma_std is not None or gamma_rec_std is not None:
+            var_gamma = reflection_variance(
+                self.evaluate(freq), source.gamma, gamma_rec, source.q, source.gamma_std,
+                gamma_rec_std,
             )
             std_meas = np.sqrt(std_meas**2 + var_gamma)
-        if gamma_rec_std is not None:
-            var_rec = receiver_temperature_variance(
-                self.evaluate(freq), source.gamma, gamma_rec, source.q,
-                np.broadcast_to(np.asarray(gamma_rec_std, dtype=float), freq.shape),
-            )
-            std_meas = np.sqrt(std_meas**2 + var_rec)
         return CalibratedSpectrum(
             freq,
             mean,

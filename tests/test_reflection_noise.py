@@ -9,7 +9,7 @@ import pytest
 
 from calibration.noise_waves import design_terms, source_temperature
 from calibration.radiometric_solver import solve_radiometric
-from calibration.reflection_noise import temperature_variance
+from calibration.reflection_noise import receiver_temperature_variance, temperature_variance
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 WIDTH = 8 * ITPM_CHANNEL_WIDTH_HZ  # 820 channels
@@ -33,6 +33,15 @@ def test_first_order_variance_matches_monte_carlo(seed):
         temps = source_temperature(theta, design_terms(draws, run.data.gamma_rec), src.q)
         ratio = np.var(temps, axis=0) / predicted
         # 4000 draws: a variance is known to sqrt(2/4000) = 2.2 %; the median of 820 is tighter
+        assert abs(np.median(ratio) - 1.0) < 0.02, name
+        assert np.all(np.abs(ratio - 1.0) < 0.15), name
+        # The receiver's reflection, drawn instead of the source's.
+        predicted = receiver_temperature_variance(
+            theta, src.gamma, run.data.gamma_rec, src.q, sigma
+        )
+        rec_draws = run.data.gamma_rec + (draws - src.gamma)
+        temps = source_temperature(theta, design_terms(src.gamma, rec_draws), src.q)
+        ratio = np.var(temps, axis=0) / predicted
         assert abs(np.median(ratio) - 1.0) < 0.02, name
         assert np.all(np.abs(ratio - 1.0) < 0.15), name
 
