@@ -193,9 +193,8 @@ def _fit_shrinkage(
         # The smooth-function hypothesis (averaging.with_smooth_hypothesis), offered only
         # where the data alone constrain every term of it, as fixed orders must be.
         full = choice.max_orders
-        if full not in grids:
+        if full not in grids:  # scored for the mixture; the search's table keeps its own
             log_evidence(full)
-            table.pop(full, None)  # scored for the mixture, not a step of the search
         box = int(np.prod([hi - lo + 1 for lo, hi in zip(
             choice.min_orders, choice.max_orders, strict=True)]))
         pool = with_smooth_hypothesis(grids, full, box)
