@@ -268,7 +268,7 @@ def _floor_summary(solution: Solution, run: str, name: str) -> None:
     data, source, spectrum = _calibrate(solution, run, name)
     used = [n for n in solution.calibrators if n in data.sources]
     cal_data = data.subset(used) if len(used) == len(solution.calibrators) and used else data
-    floor = noise_floor(cal_data, source, solution.parameters).rms
+    floor = noise_floor(cal_data, source, solution.parameters, own_reflection=False).rms
     predicted = _rms(spectrum.std_calibration)
     print(f"source {name!r} of {run} ({len(cal_data.names)} calibrators):")
     print(f"  noise floor RMS (Cramer-Rao, radiometer noise): {_mk(floor)}")

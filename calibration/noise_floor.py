@@ -59,13 +59,18 @@ def noise_floor(
     source: SourceData,
     parameters: PolynomialParameters,
     gamma_rec: ComplexArray | None = None,
+    own_reflection: bool = True,
 ) -> NoiseFloor:
     """Floor of ``source`` calibrated from ``data``, for the model ``parameters``.
 
     ``parameters`` supplies the orders and the point at which the information is
     evaluated: the truth in a simulation, a solution's posterior mean otherwise.
     ``source`` supplies its reflection and Q (use the noiseless Q when known);
-    ``gamma_rec`` defaults to the run's receiver reflection.
+    ``gamma_rec`` defaults to the run's receiver reflection. ``own_reflection``: whether
+    the source's own reflection errors (its measured reflection's and the receiver's, used
+    in calibrating it) count; yes when the error is judged against its true temperature,
+    no when against the temperature its measured reflections imply (the simulated
+    receiver's :meth:`~reach_receiver.sim.physics.ReceiverPhysics.calibration_error_k`).
     """
     freq = data.freq_hz
     orders = parameters.orders
@@ -93,7 +98,7 @@ def noise_floor(
     src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
     src_rows = design_rows(src_terms.matrix(source.q), basis, orders)
     z = solve_triangular(chol, src_rows.T, lower=True)
-    direct = reflection_variance(
+    direct = 0.0 if not own_reflection else reflection_variance(
         theta, source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec, source.q,
         source.gamma_std, data.gamma_rec_std,
     )

@@ -221,7 +221,7 @@ def _floor_rows(inputs: ReportInputs, calibrated: Calibrated) -> list[tuple[str,
     cal_data = data.subset(used) if used and len(used) == len(solution.calibrators) else data
     rows: list[tuple[str, ...]] = []
     for name, source in inputs.others.items():
-        floor = noise_floor(cal_data, source, solution.parameters).rms
+        floor = noise_floor(cal_data, source, solution.parameters, own_reflection=False).rms
         predicted = _rms(calibrated.spectra[name].std_calibration)
         actual = "not simulated"
         if inputs.truth is not None:

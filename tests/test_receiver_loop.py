@@ -187,3 +187,20 @@ def test_calibrated_antenna_matches_the_sky_within_its_error_bars(measured):
     # std_calibration / std, not by 1 / sqrt(n_channels).
     common = np.median(spectrum.std_calibration) / np.median(spectrum.std)
     assert abs(np.mean(z)) < 3 * common, (np.mean(z), common)
+
+
+def test_each_s11_carries_its_trace_noise_and_the_noise_scale_is_one(measured):
+    """The hand-over states each sweep's trace noise, estimated from the sweep alone; it
+    matches the sweep's actual scatter about the simulator's true reflection (known here),
+    and with it the solver's noise scale s^2 is the radiometer equation's 1 (it was 1.13
+    when the VNA's noise on the reflections was not stated)."""
+    data, antenna, _, _ = engine_data(measured)
+    physics = measured["sim"].physics
+    stated = {name: float(np.max(src.gamma_std)) for name, src in data.sources.items()}
+    stated["ant"] = float(np.max(antenna.gamma_std))
+    stated["lna"] = float(np.max(data.gamma_rec_std))
+    for name, sigma in stated.items():
+        m = measured["s11"][name]
+        actual = np.sqrt(np.mean(np.abs(m.s11 - physics.reflection(name, m.freq_hz)) ** 2))
+        assert sigma == pytest.approx(actual, rel=0.15), name
+    assert 0.9 < solve_radiometric(data).posterior.noise_variance < 1.1

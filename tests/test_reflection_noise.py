@@ -9,7 +9,11 @@ import pytest
 
 from calibration.noise_waves import design_terms, source_temperature
 from calibration.radiometric_solver import solve_radiometric
-from calibration.reflection_noise import receiver_temperature_variance, temperature_variance
+from calibration.reflection_noise import (
+    receiver_temperature_variance,
+    temperature_variance,
+    trace_noise,
+)
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 WIDTH = 8 * ITPM_CHANNEL_WIDTH_HZ  # 820 channels
@@ -87,3 +91,24 @@ def test_reflection_error_makes_the_predictive_honest(integration_s):
     assert 0.9 < float(np.sqrt(np.mean(np.square(clean_ratios)))) < 1.1
     assert 0.95 < np.median(scales) < 1.05  # 10 x ~10^4 rows: s^2 known to ~1 %
     assert np.median(ignored_scales) > 1.3 * np.median(scales)
+
+
+@pytest.mark.parametrize("sigma", [3e-5, 3.6e-4, 3e-3])
+def test_trace_noise_is_read_off_a_sweep_of_a_long_cable(sigma):
+    """A 10 m cable's reflection (a full turn every ~10 MHz) on REACH's 1401-point sweep,
+    with circular noise of rms sigma: the estimate is within 5 % over 20 seeds (its own
+    scatter is ~2 %), and a sweep without noise, or one too coarse for the ripple, gives
+    no estimate rather than a wrong one."""
+    f = np.linspace(40e6, 180e6, 1401)
+    cable = 0.9 * np.exp(-2j * np.pi * f * 95e-9) * (1 - 0.1 * (f / 180e6) ** 2)
+    estimates = []
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        noise = sigma * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
+        estimates.append(trace_noise(cable + noise / np.sqrt(2)))
+    assert np.mean(estimates) == pytest.approx(sigma, rel=0.05)
+    assert trace_noise(cable) is None
+    coarse = np.linspace(40e6, 180e6, 101)
+    rng = np.random.default_rng(0)
+    noisy = 0.9 * np.exp(-2j * np.pi * coarse * 95e-9) + sigma * rng.standard_normal(101)
+    assert trace_noise(noisy) is None

@@ -154,12 +154,7 @@ def _rfi(data: CalibrationData, others: Others,
     report["rfi_flagged_hz"] = [float(f) for f in data.freq_hz[flagged]]
     if not flagged.any():
         return data, others
-    data = replace(
-        data,
-        freq_hz=data.freq_hz[keep],
-        gamma_rec=data.gamma_rec[keep],
-        sources={n: s.select(keep) for n, s in data.sources.items()},
-    )
+    data = data.select(keep, "the RFI flags")
     return data, {n: s.select(keep) for n, s in others.items()}
 
 

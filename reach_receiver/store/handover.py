@@ -31,7 +31,13 @@ A calibration made during a run (the ``calibrate`` step), the run file's engine 
 
 S11s are interpolated onto the channels by cubic splines through their real and
 imaginary parts (:func:`interpolate_s11`): the REACH sources' reflections are smooth
-on the VNA's grid (the 10 m cable's ripple has a period of about 10 MHz).
+on the VNA's grid (the 10 m cable's ripple has a period of about 10 MHz). Each sweep's
+trace noise, estimated from its own scatter on the VNA's grid
+(:func:`calibration.reflection_noise.trace_noise`), goes beside it as ``{src}_s11_std``
+(``lna_s11_std``), so that the solver, the error bars and the floor carry it. The spline
+spreads one VNA point's error over the ~8 channels between points: the per-channel
+variance is right, the engine's independence between channels is not (the fit, which
+averages thousands of channels, sees these errors a little too reduced).
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
 from calibration.hdf5_io import RECEIVER_RUN_FORMAT, RunLayout, read_run_layout
+from calibration.reflection_noise import trace_noise
 
 from .parts import (
     FORMAT_VERSION,
@@ -272,9 +279,18 @@ def write_layout(f: Any, groups: Groups, handover: HandOver) -> None:
             raise ValueError(f"S11 of {name} does not cover the band")
         return value
 
+    def noise(name: str, dataset_name: str) -> None:
+        # The sweep's trace noise, from its own scatter on the VNA's grid, per channel
+        # (calibration.reflection_noise.trace_noise; nothing where it cannot tell).
+        g = groups[handover.s11[name]]
+        sigma = trace_noise(g["s11"][()])
+        if sigma is not None:
+            dataset(obs, dataset_name, np.full(freq.size, sigma), "1", measurement=g.name)
+
     if RECEIVER in handover.s11:
         g = groups[handover.s11[RECEIVER]]
         dataset(obs, "lna_s11", gamma(RECEIVER), UNITS_REFLECTION, measurement=g.name)
+        noise(RECEIVER, "lna_s11_std")
     for source, numbers in handover.cycles.items():
         rows = [groups[n] for n in numbers]
         for position, suffix in POSITIONS:
@@ -295,6 +311,7 @@ def write_layout(f: Any, groups: Groups, handover: HandOver) -> None:
         )
         s11 = groups[handover.s11[source]]
         dataset(obs, f"{source}_s11", gamma(source), UNITS_REFLECTION, measurement=s11.name)
+        noise(source, f"{source}_s11_std")
         if source in handover.calibrators:
             per_cycle = [float(g["temperature"][()]) for g in rows]
             stds = [float(g["temperature"].attrs.get("std_k", 0.0)) for g in rows]

@@ -67,7 +67,9 @@ class CalibrationOutcome:
 
     ``floor_k`` is the RMS over the band of the Cramer-Rao floor of the validation
     source's calibrated temperature, ``predicted_k`` that of the solution's calibration
-    error (posterior).
+    error (posterior): the error the calibration adds, against the temperature the
+    validation source's measured reflections imply (the VNA's trace noise on them is its
+    own measurement error, as its radiometer noise is, and in neither number).
     """
 
     solution: Solution
@@ -112,16 +114,13 @@ def calibrate(
         handover = dataclasses.replace(handover, corrections=report)
     solution = solve_radiometric(data)
     validation = others.get(ANTENNA) or data.sources[data.names[0]]
-    spectrum = solution.calibrate(
-        data.freq_hz, data.gamma_rec, validation,
-        data.channel_width_hz, data.gamma_rec_std,
-    )
+    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, validation)
     return CalibrationOutcome(
         solution=solution,
         data=data,
         validation=validation,
         handover=handover,
-        floor_k=noise_floor(data, validation, solution.parameters).rms,
+        floor_k=noise_floor(data, validation, solution.parameters, own_reflection=False).rms,
         predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2))),
     )
 
