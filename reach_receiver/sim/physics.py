@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from calibration.basis import PolynomialBasis
 from calibration.data import CalibrationData, SourceData
-from calibration.noise_waves import design_terms, dicke_powers, source_temperature
+from calibration.noise_waves import dicke_powers
 from calibration.reflections import lna_reflection, reach_source_reflection, resistor
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, ReceiverTruth, enr_noise_temperature
 from calibration.solution import Solution
@@ -340,12 +340,16 @@ class ReceiverPhysics:
         """RMS over the band of ``T_cal(Q) - T_true(Q)`` for ``source`` (kelvin).
 
         Both temperatures use the same measured Q (eq. 3.21), so the difference is the
-        error the calibration adds, which its posterior predicts.
+        error the calibration adds, which its posterior predicts, plus that of the
+        reflections measured for this source (the VNA's trace noise on its S11 and the
+        receiver's). ``T_true`` is :meth:`true_temperature_k`, at the sources' plane: with
+        :mod:`~reach_receiver.sim.effects` on, the receiver seen from the sources is the
+        MTS path and the LNA together, whose noise waves are not the LNA's own
+        (:meth:`effective_theta`), so these could not judge a corrected calibration.
         """
         freq = data.freq_hz
-        spectrum = solution.calibrate(freq, data.gamma_rec, source, data.channel_width_hz)
-        terms = design_terms(source.gamma, data.gamma_rec)
-        true_t = source_temperature(self.effective_theta(freq), terms, source.q)
+        spectrum = solution.calibrate(freq, data.gamma_rec, source)
+        true_t = self.true_temperature_k(source.name, source.q, freq)
         return float(np.sqrt(np.mean((spectrum.mean - true_t) ** 2)))
 
     def enr_k(self, freq_hz: FloatArray) -> FloatArray:

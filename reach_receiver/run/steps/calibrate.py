@@ -31,6 +31,7 @@ from calibration.data import SourceData
 from calibration.errors import FileFormatError
 from calibration.hdf5_io import read_solution
 from calibration.noise_floor import noise_floor
+from calibration.reflection_noise import reflection_variance
 from calibration.solution import Solution
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
@@ -67,9 +68,9 @@ class CalibrationOutcome:
 
     ``floor_k`` is the RMS over the band of the Cramer-Rao floor of the validation
     source's calibrated temperature, ``predicted_k`` that of the solution's calibration
-    error (posterior): the error the calibration adds, against the temperature the
-    validation source's measured reflections imply (the VNA's trace noise on them is its
-    own measurement error, as its radiometer noise is, and in neither number).
+    error (posterior); both hold the VNA's trace noise on the validation source's and the
+    receiver's reflections where the run file states it (a per-channel error of the
+    calibrated source that no calibration removes), and neither its radiometer noise.
     """
 
     solution: Solution
@@ -115,13 +116,17 @@ def calibrate(
     solution = solve_radiometric(data)
     validation = others.get(ANTENNA) or data.sources[data.names[0]]
     spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, validation)
+    reflections = reflection_variance(
+        solution.evaluate(data.freq_hz), validation.gamma, data.gamma_rec, validation.q,
+        validation.gamma_std, data.gamma_rec_std,
+    )
     return CalibrationOutcome(
         solution=solution,
         data=data,
         validation=validation,
         handover=handover,
-        floor_k=noise_floor(data, validation, solution.parameters, own_reflection=False).rms,
-        predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2))),
+        floor_k=noise_floor(data, validation, solution.parameters).rms,
+        predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2 + reflections))),
     )
 
 
