@@ -58,6 +58,9 @@ ComplexArray = NDArray[np.complex128]
 
 T0_K = 290.0
 
+#: Correlation lengths of :func:`sample_reflections` are capped at this many sweep lengths.
+MAX_CORRELATION_SWEEPS = 4.0
+
 
 @dataclass(frozen=True)
 class AccuracyBand:
@@ -143,21 +146,26 @@ def sample_reflections(
 
     Returns shape ``(n_samples, n_channels)``: ``gamma + sigma (x + j y)`` with ``x, y``
     unit Gaussian processes over channels of correlation ``exp(-d^2 / (2 c^2))`` at a
-    distance of ``d`` channels, ``c = correlation_channels`` (0: independent channels).
+    distance of ``d`` channels, ``c = correlation_channels`` (0: independent channels; a
+    length beyond :data:`MAX_CORRELATION_SWEEPS` sweeps counts as that many, where a draw
+    is already rigid across the sweep to 3 %).
     Pushing each draw through a solver gives the reflection error's share of its error bars.
     """
     g = np.asarray(gamma, dtype=complex)
     if g.ndim != 1:
         raise InvalidDataError("sample_reflections takes one reflection per channel (1-D)")
     sigma = (accuracy or VnaAccuracy()).sigma_magnitude(g)
-    white = rng.standard_normal((2, n_samples, g.size))
     if correlation_channels > 0:
-        # white noise smoothed by a Gaussian of width c / sqrt(2) has correlation exp(-d^2/2c^2)
-        width = correlation_channels / np.sqrt(2)
+        # white noise smoothed by a Gaussian of width c / sqrt(2) has correlation exp(-d^2/2c^2);
+        # it is drawn 5 widths beyond both ends so that the edges are as correlated as the middle
+        width = min(correlation_channels, MAX_CORRELATION_SWEEPS * g.size) / np.sqrt(2)
         half = int(np.ceil(5 * width))
         kernel = np.exp(-0.5 * (np.arange(-half, half + 1) / width) ** 2)
-        norm = np.sqrt(np.convolve(np.ones(g.size), kernel**2, mode="same"))
-        white = fftconvolve(white, kernel[None, None, :], mode="same", axes=-1) / norm
+        kernel /= np.sqrt(np.sum(kernel**2))
+        white = rng.standard_normal((2, n_samples, g.size + 2 * half))
+        white = fftconvolve(white, kernel[None, None, :], mode="valid", axes=-1)
+    else:
+        white = rng.standard_normal((2, n_samples, g.size))
     return np.asarray(g + sigma * (white[0] + 1j * white[1]), dtype=complex)
 
 

@@ -88,6 +88,16 @@ def test_correlated_draws_have_the_stated_correlation_and_variance(corr):
         assert c == pytest.approx(np.exp(-lag**2 / (2 * corr**2)), abs=0.04)
 
 
+def test_a_correlation_longer_than_the_band_gives_smooth_draws_of_the_stated_variance():
+    """Kernel wider than the sweep (40 channels, c = 60): a broadcasting error before."""
+    rng = np.random.default_rng(8)
+    g = np.full(40, reading(-10.0))
+    draws = sample_reflections(g, rng, 4000, correlation_channels=60.0)
+    x = (draws.real - g.real) / VnaAccuracy().sigma_magnitude(g)
+    np.testing.assert_allclose(np.std(x, axis=0), 1.0, atol=0.06)
+    assert np.mean(x[:, 0] * x[:, -1]) == pytest.approx(np.exp(-(39**2) / (2 * 60.0**2)), abs=0.05)
+
+
 def test_expected_t_ns_from_the_enr_table():
     np.testing.assert_allclose(expected_t_ns([50e6, 100e6]),
                                290 * 10 ** (np.array([6.00, 5.79]) / 10), rtol=1e-12)
