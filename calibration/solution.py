@@ -17,7 +17,7 @@ The predictive distribution of ``T_src`` (eq. 3.41) has two independent parts:
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -46,6 +46,10 @@ class CalibratedSpectrum:
     channel). ``rows`` are the source's design rows (``mean = rows @ parameters``) and
     ``draw_calibration(n, rng)`` draws ``n`` calibrated spectra from the solution's
     posterior alone: every solver (polynomial or per channel) supplies its own.
+    ``systematic``, when attached (:meth:`with_systematics`), holds Monte-Carlo draws
+    ``(K, n_channels)`` of the VNA's data-sheet error on this spectrum
+    (:mod:`calibration.vna_systematics`): deviations from this spectrum, correlated
+    across channels, part of every interval and sample, their RMS ``std_systematic``.
     """
 
     freq_hz: FloatArray
@@ -55,19 +59,43 @@ class CalibratedSpectrum:
     dof: float
     rows: FloatArray = field(repr=False)
     draw_calibration: Callable[[int, np.random.Generator], FloatArray] = field(repr=False)
+    systematic: FloatArray | None = field(default=None, repr=False)
+
+    def with_systematics(self, deviations: FloatArray) -> CalibratedSpectrum:
+        """A copy with the VNA systematic error's draws ``(K, n_channels)`` attached."""
+        dev = np.asarray(deviations, dtype=float)
+        if dev.ndim != 2 or dev.shape[1] != self.freq_hz.size or dev.shape[0] < 2:
+            raise InvalidDataError(
+                f"systematic draws must be (K >= 2, {self.freq_hz.size}); got {dev.shape}"
+            )
+        return replace(self, systematic=dev)
+
+    @property
+    def std_systematic(self) -> FloatArray:
+        """RMS of the attached systematic draws about this spectrum (zero when none)."""
+        if self.systematic is None:
+            return np.zeros(self.freq_hz.shape)
+        return np.asarray(np.sqrt(np.mean(self.systematic**2, axis=0)))
 
     @property
     def std(self) -> FloatArray:
         """Total predictive standard deviation per channel."""
-        return np.sqrt(self.std_calibration**2 + self.std_measurement**2)
+        return np.sqrt(self.std_calibration**2 + self.std_measurement**2 + self.std_systematic**2)
 
     def interval(
         self, level: float = 0.68, calibration_only: bool = False
     ) -> tuple[FloatArray, FloatArray]:
-        """Central credible interval at ``level`` per channel."""
+        """Central credible interval at ``level`` per channel.
+
+        ``calibration_only`` leaves out the source's own measurement noise (it keeps the
+        attached systematic error, an error of the calibration chain).
+        """
         q = 0.5 + 0.5 * level
         z = stats.norm.ppf(q) if np.isinf(self.dof) else stats.t.ppf(q, self.dof)
-        std = self.std_calibration if calibration_only else self.std
+        if calibration_only:
+            std = np.sqrt(self.std_calibration**2 + self.std_systematic**2)
+        else:
+            std = self.std
         return self.mean - z * std, self.mean + z * std
 
     def samples(
@@ -75,6 +103,8 @@ class CalibratedSpectrum:
     ) -> FloatArray:
         """``n`` draws of the calibrated spectrum, shape ``(n, n_channels)``."""
         draws = self.draw_calibration(n, rng)
+        if self.systematic is not None:
+            draws = draws + self.systematic[rng.integers(self.systematic.shape[0], size=n)]
         if not calibration_only:
             draws = draws + rng.standard_normal(draws.shape) * self.std_measurement
         return np.asarray(draws)
