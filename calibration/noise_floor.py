@@ -34,7 +34,7 @@ from .data import CalibrationData, SourceData
 from .noise_waves import design_terms
 from .normal_equations import build_normal_equations
 from .polynomial_model import PolynomialParameters, design_rows
-from .radiometric_solver import linearise
+from .radiometric_solver import LinearisedProblem, linearise
 from .reflection_noise import reflection_variance
 
 FloatArray = NDArray[np.float64]
@@ -76,15 +76,7 @@ def noise_floor(
     orders = parameters.orders
     basis = parameters.basis.matrix(freq, max(orders))
     theta = parameters.evaluate(freq)
-    temps, _, var_q = data.stacked()
-    terms = data.terms()
-    noiseless_q = np.asarray((temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float)
-    gammas = np.stack([s.gamma for s in data.sources.values()])
-    extra = reflection_variance(
-        theta[:, None, :], gammas, data.gamma_rec, noiseless_q, data.reflection_errors(),
-        data.gamma_rec_std,
-    )
-    rows = linearise(terms, temps, noiseless_q, var_q, theta, extra)
+    rows = _information_rows(data, theta)
     normal = build_normal_equations(
         rows.features,
         rows.weights,
@@ -98,8 +90,59 @@ def noise_floor(
     src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
     src_rows = design_rows(src_terms.matrix(source.q), basis, orders)
     z = solve_triangular(chol, src_rows.T, lower=True)
-    direct = 0.0 if not own_reflection else reflection_variance(
+    direct = _own_reflection(data, source, theta, gamma_rec) if own_reflection else 0.0
+    return NoiseFloor(freq, np.sqrt(np.sum(z**2, axis=0) + direct))
+
+
+def channel_noise_floor(
+    data: CalibrationData,
+    source: SourceData,
+    theta: FloatArray,
+    gamma_rec: ComplexArray | None = None,
+    own_reflection: bool = True,
+) -> NoiseFloor:
+    """Floor of ``source`` for an estimator that solves each channel alone (thesis 4.7, 4.8).
+
+    The per-channel model has five free parameters at every channel (``theta``, ``(5, N)``
+    on ``data``'s channels: the truth, or a
+    :class:`~calibration.per_frequency.ChannelSolution`'s mean). Its Fisher information
+    at channel ``f`` is the ``5 x 5`` matrix ``F_f = sum_i w_if x_if x_if^T`` of the same
+    Gauss-Newton rows as :func:`noise_floor`; each calibrator's temperature uncertainty
+    adds to its row's variance (one channel cannot separate an offset from the
+    parameters). The bound is ``var T_src(f) >= x_src(f)^T F_f^-1 x_src(f)``, plus the
+    source's own reflection part when ``own_reflection``. It lies above the polynomial
+    floor: each channel's five parameters are learnt from that channel alone.
+    """
+    rows = _information_rows(data, theta)
+    weights = 1.0 / (1.0 / rows.weights + data.temperature_variances()[:, None])
+    x = np.moveaxis(rows.features, 0, 1)  # (N, M, 5)
+    fisher = np.einsum("nmp,mn,nmq->npq", x, weights, x)
+    src_terms = design_terms(source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec)
+    jacobi = np.sqrt(np.diagonal(fisher, axis1=1, axis2=2))  # scaled: no inverse, stable
+    chol = np.linalg.cholesky(fisher / (jacobi[:, :, None] * jacobi[:, None, :]))
+    src_rows = src_terms.matrix(source.q) / jacobi  # (N, 5)
+    z = np.linalg.solve(chol, src_rows[:, :, None])[:, :, 0]
+    direct = _own_reflection(data, source, theta, gamma_rec) if own_reflection else 0.0
+    return NoiseFloor(data.freq_hz, np.sqrt(np.sum(z**2, axis=1) + direct))
+
+
+def _information_rows(data: CalibrationData, theta: FloatArray) -> LinearisedProblem:
+    """The calibrators' Gauss-Newton rows at ``theta`` and their noiseless ``Q``."""
+    temps, _, var_q = data.stacked()
+    terms = data.terms()
+    noiseless_q = np.asarray((temps - terms.offset(theta)) / (terms.x_l * theta[3]), dtype=float)
+    gammas = np.stack([s.gamma for s in data.sources.values()])
+    extra = reflection_variance(
+        theta[:, None, :], gammas, data.gamma_rec, noiseless_q, data.reflection_errors(),
+        data.gamma_rec_std,
+    )
+    return linearise(terms, temps, noiseless_q, var_q, theta, extra)
+
+
+def _own_reflection(
+    data: CalibrationData, source: SourceData, theta: FloatArray, gamma_rec: ComplexArray | None
+) -> FloatArray | float:
+    return reflection_variance(
         theta, source.gamma, data.gamma_rec if gamma_rec is None else gamma_rec, source.q,
         source.gamma_std, data.gamma_rec_std,
     )
-    return NoiseFloor(freq, np.sqrt(np.sum(z**2, axis=0) + direct))

@@ -17,15 +17,18 @@ with covariance ``(1 - t)^2 Sigma_a + t^2 Sigma_b``. Nothing is extrapolated.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .data import CalibrationData, SourceData, check_source
 from .errors import IllPosedError, InvalidDataError
-from .noise_waves import INDEX, N_PARAMETERS, design_terms
+from .noise_waves import INDEX, N_PARAMETERS, PARAMETERS, design_terms
 from .radiometric_solver import LinearisedProblem, linearise
+from .reflection_noise import reflection_variance
 from .solution import CalibratedSpectrum
 
 FloatArray = NDArray[np.float64]
@@ -53,6 +56,9 @@ class ChannelSolution:
         ``"least_squares"`` or ``"bayesian"``.
     calibrators
         Names of the calibrators used.
+    metadata
+        What the solve was made from and how (the run file, the preparation), as for
+        :attr:`calibration.solution.Solution.metadata`.
     """
 
     freq_hz: FloatArray
@@ -61,6 +67,7 @@ class ChannelSolution:
     log_evidence: FloatArray | None
     method: str
     calibrators: tuple[str, ...] = ()
+    metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         freq = np.asarray(self.freq_hz, dtype=float)
@@ -75,6 +82,22 @@ class ChannelSolution:
             )
         for name, value in (("freq_hz", freq), ("mean", mean), ("covariance", cov)):
             object.__setattr__(self, name, value)
+
+    @property
+    def band_hz(self) -> tuple[float, float]:
+        """The first and last solved channel (Hz): the range a calibration may use."""
+        return float(self.freq_hz[0]), float(self.freq_hz[-1])
+
+    @property
+    def dof(self) -> float:
+        """Degrees of freedom of the calibration error's Student-t: ``M - 5`` for least squares.
+
+        The least-squares covariance scales ``(X^T X)^-1`` by the residual variance ``s^2``
+        estimated from ``M - 5`` residuals, so its standardised errors are ``t_{M-5}``
+        (heavy-tailed for few calibrators); the Bayesian posterior is Gaussian (``inf``).
+        """
+        m = len(self.calibrators)
+        return float(m - N_PARAMETERS) if self.method == "least_squares" and m > 5 else np.inf
 
     @property
     def finite_covariance(self) -> bool:
@@ -147,6 +170,7 @@ class ChannelSolution:
         gamma_rec: ArrayLike,
         source: SourceData,
         channel_width_hz: float | None = None,
+        gamma_rec_std: ArrayLike | None = None,
     ) -> CalibratedSpectrum:
         """Calibrate ``source`` (eq. 3.27) channel by channel with its uncertainty.
 
@@ -156,6 +180,11 @@ class ChannelSolution:
         ``std_calibration = sqrt(x_src^T Sigma x_src)``. The measurement noise is the
         radiometer model of :meth:`calibration.solution.Solution.calibrate`,
         ``|X_L T_NS| sqrt(var Q_src)``, and zero when ``channel_width_hz`` is ``None``.
+        ``gamma_rec_std`` (the run's :attr:`CalibrationData.gamma_rec_std`) and the
+        source's own ``gamma_std`` add the VNA's random reflection errors to the
+        measurement part, exactly as :meth:`~calibration.solution.Solution.calibrate` does
+        (:func:`calibration.reflection_noise.reflection_variance`, first order in the
+        errors, at the interpolated parameters).
         """
         f, lo, t = self._bracket(freq_hz)
         source = check_source(source, f.size)
@@ -176,12 +205,44 @@ class ChannelSolution:
         else:
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * theta[INDEX["NS"]]) * np.sqrt(var_q)
+        if source.gamma_std is not None or gamma_rec_std is not None:
+            var_gamma = reflection_variance(
+                theta, source.gamma, g_rec, source.q, source.gamma_std, gamma_rec_std
+            )
+            std_meas = np.sqrt(std_meas**2 + var_gamma)
 
         def draw(n: int, rng: np.random.Generator) -> FloatArray:
             theta = self.sample_parameters(f, n, rng)
             return np.asarray(np.einsum("npf,fp->nf", theta, rows))
 
-        return CalibratedSpectrum(f, mean, std_cal, std_meas, np.inf, rows, draw)
+        return CalibratedSpectrum(f, mean, std_cal, std_meas, self.dof, rows, draw)
+
+    def summary(self) -> dict[str, Any]:
+        """Plain-data summary, as :meth:`calibration.solution.Solution.summary`.
+
+        ``band_mean_k``: each parameter averaged over the solved channels;
+        ``channel_std_k``: the RMS over channels of its per-channel std (the error of one
+        channel; channels are independent, so the band average's own std is
+        ``sqrt(sum sigma_n^2) / N``, ``band_mean_std_k``); ``log_evidence``: the sum over
+        channels of eq. 4.22 (Bayesian; ``None`` for least squares).
+        """
+        variance = np.diagonal(self.covariance, axis1=1, axis2=2).T  # (5, N)
+        n = self.freq_hz.size
+        return {
+            "method": self.method,
+            "kind": "per-channel",
+            "band_hz": list(self.band_hz),
+            "n_channels": n,
+            "calibrators": list(self.calibrators),
+            "band_mean_k": dict(zip(PARAMETERS, map(float, self.mean.mean(axis=1)), strict=True)),
+            "channel_std_k": dict(
+                zip(PARAMETERS, map(float, np.sqrt(variance.mean(axis=1))), strict=True)
+            ),
+            "band_mean_std_k": dict(
+                zip(PARAMETERS, map(float, np.sqrt(variance.sum(axis=1)) / n), strict=True)
+            ),
+            "log_evidence": None if self.log_evidence is None else float(np.sum(self.log_evidence)),
+        }
 
 
 def solve_least_squares_per_channel(data: CalibrationData) -> ChannelSolution:
