@@ -44,7 +44,13 @@ Solution files (``format = "reach-calibration-solution"``): root attributes ``me
 A model-averaged posterior (:class:`~calibration.averaging.MixturePosterior`) also has
 ``/posterior/components``: dataset ``weights`` and one group ``0``, ``1``, ... per component,
 each laid out as ``/posterior`` itself (its own orders), so that draws read back come from
-the mixture, not from a Gaussian with its moments.
+the mixture, not from a Gaussian with its moments. The root attribute ``solution_kind`` is
+``"polynomial"`` for this layout (files without it are polynomial) and ``"per-channel"``
+for a :class:`~calibration.per_frequency.ChannelSolution`: root attributes ``method``
+(``least_squares`` or ``bayesian``), ``calibrators``, ``metadata``; ``/channels`` datasets
+``frequencies`` (Hz, ``(N,)``), ``mean`` (K, ``(5, N)``), ``covariance`` (K^2,
+``(N, 5, 5)``, ``inf`` on the diagonal where undefined) and, for the Bayesian solver,
+``log_evidence`` (nats, ``(N,)``); attribute ``parameters`` (the order of the five).
 """
 
 from __future__ import annotations
@@ -69,6 +75,7 @@ from .conjugate import LinearPosterior
 from .data import CalibrationData, Integration, SourceData, check_source
 from .errors import FileFormatError, InvalidDataError
 from .noise_waves import N_PARAMETERS, PARAMETERS
+from .per_frequency import ChannelSolution
 from .polynomial_model import Orders, PolynomialParameters, as_orders
 from .simulate import ReceiverTruth
 from .solution import CalibratedSpectrum, Solution
@@ -80,6 +87,8 @@ RUN_FORMAT = "reach-calibration-run"
 RECEIVER_RUN_FORMAT = "reach-receiver-run"
 RUN_FORMATS = (RUN_FORMAT, RECEIVER_RUN_FORMAT)
 SOLUTION_FORMAT = "reach-calibration-solution"
+#: ``solution_kind`` of a solution file: polynomial (the default when absent) or per channel.
+POLYNOMIAL_KIND, PER_CHANNEL_KIND = "polynomial", "per-channel"
 CALIBRATED_FORMAT = "reach-calibrated-spectrum"
 POWER_UNITS = "arbitrary (spectrometer power)"
 GAMMA_UNITS = "1 (complex reflection coefficient)"
@@ -419,18 +428,29 @@ def read_truth(path: PathLike) -> ReceiverTruth | None:
         return ReceiverTruth(params, gain, offset)
 
 
-def write_solution(path: PathLike, solution: Solution) -> None:
-    """Write a :class:`Solution` (atomically); :func:`read_solution` restores it exactly."""
+def write_solution(path: PathLike, solution: Solution | ChannelSolution) -> None:
+    """Write a solution of any solver (atomically); :func:`read_solution` restores it exactly."""
     with _atomic_h5(path, SOLUTION_FORMAT) as f:
         write_solution_group(f, solution)
 
 
-def write_solution_group(f: Any, solution: Solution) -> None:
+def write_solution_group(f: Any, solution: Solution | ChannelSolution) -> None:
     """Write a solution's layout (module docstring) into an open HDF5 file or group ``f``."""
-    post, basis = solution.posterior, solution.basis
-    f.attrs.update({"method": solution.method, "measurement_model": solution.measurement_model})
-    f.attrs.update({"calibrators": list(solution.calibrators)})
+    f.attrs.update({"method": solution.method, "calibrators": list(solution.calibrators)})
     f.attrs["metadata"] = _json(solution.metadata)
+    if isinstance(solution, ChannelSolution):
+        f.attrs["solution_kind"] = PER_CHANNEL_KIND
+        g = f.create_group("channels")
+        g.attrs["parameters"] = list(PARAMETERS)
+        _dataset(g, "frequencies", solution.freq_hz, "Hz")
+        _dataset(g, "mean", solution.mean, "K")
+        _dataset(g, "covariance", solution.covariance, "K^2")
+        if solution.log_evidence is not None:
+            _dataset(g, "log_evidence", solution.log_evidence, "nats")
+        return
+    f.attrs["solution_kind"] = POLYNOMIAL_KIND
+    post, basis = solution.posterior, solution.basis
+    f.attrs["measurement_model"] = solution.measurement_model
     b = f.create_group("basis")
     b.attrs.update({"kind": basis.kind, "f_lo_hz": basis.f_lo_hz, "f_hi_hz": basis.f_hi_hz})
     g = f.create_group("posterior")
@@ -479,14 +499,20 @@ def _read_posterior(g: Any, path: PathLike) -> LinearPosterior:
     return MixturePosterior(**vars(posterior), components=components, weights=weights)
 
 
-def read_solution(path: PathLike) -> Solution:
-    """Read a solution written by :func:`write_solution`."""
+def read_solution(path: PathLike) -> Solution | ChannelSolution:
+    """Read a solution written by :func:`write_solution`: whichever kind it holds."""
     with _open(path, SOLUTION_FORMAT) as f:
         return read_solution_group(f, path)
 
 
-def read_solution_group(f: Any, path: PathLike) -> Solution:
+def read_solution_group(f: Any, path: PathLike) -> Solution | ChannelSolution:
     """Read a solution from the open HDF5 file or group ``f``; errors name ``path``."""
+    kind = _as_str(f.attrs.get("solution_kind", POLYNOMIAL_KIND))
+    if kind == PER_CHANNEL_KIND:
+        return _read_channel_solution(f, path)
+    if kind != POLYNOMIAL_KIND:
+        known = f"{POLYNOMIAL_KIND!r} or {PER_CHANNEL_KIND!r}"
+        raise FileFormatError(f"{path}: unknown solution_kind {kind!r} (expected {known})")
     basis = _basis(_group(f, "basis", path), path)
     posterior = _read_posterior(_group(f, "posterior", path), path)
     ev = _group(f, "evidence", path)
@@ -508,6 +534,26 @@ def read_solution_group(f: Any, path: PathLike) -> Solution:
         tuple(calibrators or ()),
         _metadata(f, path),
     )
+
+
+def _read_channel_solution(f: Any, path: PathLike) -> ChannelSolution:
+    g = _group(f, "channels", path)
+    freq = _array(g, "frequencies", path, "f")
+    mean = _array(g, "mean", path, "f")
+    cov = _array(g, "covariance", path, "f")
+    log_z = _array(g, "log_evidence", path, "f") if "log_evidence" in g else None
+    if log_z is not None and log_z.shape != freq.shape:
+        raise FileFormatError(f"{path}: channels/log_evidence {log_z.shape} vs {freq.shape}")
+    method = _as_str(_attr(f, "method", path))
+    if method not in ("least_squares", "bayesian"):
+        raise FileFormatError(f"{path}: unknown per-channel method {method!r}")
+    try:
+        return ChannelSolution(
+            freq, mean, cov, log_z, method, tuple(_names(f, "calibrators") or ()),
+            _metadata(f, path),
+        )
+    except ValueError as err:
+        raise FileFormatError(f"{path}: bad per-channel solution: {err}") from err
 
 
 def write_calibrated(
