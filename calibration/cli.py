@@ -4,7 +4,7 @@
 
     reach-cal simulate -o RUN.h5 [--seed N] [--integration-s S] [--channel-width-hz B]
                        [--band LO HI] [--calibrators a,b,...] [--vna-sigma X]
-    reach-cal solve RUN.h5 -o SOLUTION.h5 [--method radiometric|thesis]
+    reach-cal solve RUN.h5 -o SOLUTION.h5 [--method radiometric|thesis|least-squares|bayesian]
                     [--orders n_unc,n_cos,n_sin,n_NS,n_L | --max-orders ...] [--calibrators ...]
                     [--band LO,HI] [--mask-band LO,HI] [--rfi] [--smooth-s11 P]
                     [--check-consistency | --exclude-inconsistent [N]]  (cli_corrections)
@@ -57,11 +57,12 @@ from .hdf5_io import (
     write_solution,
 )
 from .identifiability import prior_dominated_line
-from .noise_floor import noise_floor
 from .noise_waves import PARAMETERS, design_terms, source_temperature
+from .per_frequency import ChannelSolution
 from .polynomial_model import coefficient_slices
 from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .solution import CalibratedSpectrum, Solution
+from .solvers import AnySolution, band_hz, method_name, solution_noise_floor
 
 PROG = "reach-cal"
 
@@ -85,9 +86,9 @@ def _pick_source(
     return source
 
 
-def _check_band(solution: Solution, data: CalibrationData, run: str) -> None:
-    """Refuse to extrapolate the solution's polynomials outside its band."""
-    lo, hi = solution.basis.f_lo_hz, solution.basis.f_hi_hz
+def _check_band(solution: AnySolution, data: CalibrationData, run: str) -> None:
+    """Refuse to extrapolate the solution's polynomials (or channels) outside its band."""
+    lo, hi = band_hz(solution)
     tol = 1e-9 * hi
     if data.freq_hz[0] < lo - tol or data.freq_hz[-1] > hi + tol:
         raise InvalidDataError(
@@ -97,7 +98,7 @@ def _check_band(solution: Solution, data: CalibrationData, run: str) -> None:
 
 
 def _calibrate(
-    solution: Solution, run: str, name: str
+    solution: AnySolution, run: str, name: str
 ) -> tuple[CalibrationData, SourceData, CalibratedSpectrum]:
     """Read ``run`` and calibrate its source ``name`` with ``solution``."""
     data, extra = read_run(run)
@@ -158,22 +159,49 @@ def cmd_solve(args: argparse.Namespace) -> int:
         },
     )
     write_solution(args.output, solution)
-    post = solution.posterior
     print(
         f"solved {args.run} ({args.method}, {len(data.names)} calibrators, "
         f"{data.n_channels} channels) in {elapsed:.2f} s"
     )
-    how = "fixed" if args.orders else f"best of {len(solution.evidence_table)} by evidence"
-    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))} ({how})")
-    if solution.models_line():
-        print(f"averaged over models (orders, weight): {solution.models_line()}")
-    if prior_dominated_line(solution):
-        print(prior_dominated_line(solution))
-    print(f"log evidence: {post.log_evidence:.3f}")
-    print(_noise_line(solution))
+    if isinstance(solution, Solution):
+        post = solution.posterior
+        how = "fixed" if args.orders else f"best of {len(solution.evidence_table)} by evidence"
+        print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))} ({how})")
+        if solution.models_line():
+            print(f"averaged over models (orders, weight): {solution.models_line()}")
+        if prior_dominated_line(solution):
+            print(prior_dominated_line(solution))
+        print(f"log evidence: {post.log_evidence:.3f}")
+        print(_noise_line(solution))
+    else:
+        for line in channel_lines(solution):
+            print(line)
     print(noise_source_line(solution, data.freq_hz))
     print(f"wrote {args.output}")
     return 0
+
+
+def channel_lines(solution: ChannelSolution) -> list[str]:
+    """A per-channel solution in numbers: each parameter's band average +- its channel std."""
+    summary = solution.summary()
+    lines = [
+        f"per-channel solution ({method_name(solution)} solver, thesis "
+        f"{'4.7' if solution.method == 'least_squares' else '4.8'}): "
+        f"{summary['n_channels']} channels solved independently",
+        "parameters (K): band mean +- per-channel std (RMS over channels; "
+        "uncorrelated between channels)",
+    ]
+    for name in PARAMETERS:
+        mean, std = summary["band_mean_k"][name], summary["channel_std_k"][name]
+        lines.append(f"  {name:>3}: {mean:.6g} +- {std:.3g}")
+    if summary["log_evidence"] is not None:
+        lines.append(
+            f"log evidence (sum over channels, eq. 4.22, uniform prior of unit volume): "
+            f"{summary['log_evidence']:.3f}"
+        )
+    if not solution.finite_covariance:
+        lines.append("errors undefined: exactly 5 calibrators leave no residual (least squares)")
+    return lines
 
 
 def _noise_line(solution: Solution) -> str:
@@ -226,6 +254,17 @@ def _write_csv(path: Path, spectrum: CalibratedSpectrum) -> None:
 def cmd_summary(args: argparse.Namespace) -> int:
     """Print a solution's parameters and evidence, and its distance to the noise floor."""
     solution = read_solution(args.solution)
+    if isinstance(solution, ChannelSolution):
+        lo, hi = solution.band_hz
+        print(f"solution {args.solution}: {method_name(solution)} solver, per channel on "
+              f"{lo / 1e6:.3f}-{hi / 1e6:.3f} MHz")
+        print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
+        for line in channel_lines(solution):
+            print(line)
+        print(noise_source_line(solution))
+        if args.run:
+            _floor_summary(solution, args.run, args.source)
+        return 0
     post, basis = solution.posterior, solution.basis
     print(
         f"solution {args.solution}: {solution.method} solver, {basis.kind} basis on "
@@ -263,15 +302,16 @@ def cmd_summary(args: argparse.Namespace) -> int:
     return 0
 
 
-def _floor_summary(solution: Solution, run: str, name: str) -> None:
+def _floor_summary(solution: AnySolution, run: str, name: str) -> None:
     """Noise floor, predicted and (for simulations) actual calibration error of a source."""
     data, source, spectrum = _calibrate(solution, run, name)
     used = [n for n in solution.calibrators if n in data.sources]
     cal_data = data.subset(used) if len(used) == len(solution.calibrators) and used else data
-    floor = noise_floor(cal_data, source, solution.parameters, own_reflection=False).rms
+    floor = solution_noise_floor(solution, cal_data, source, own_reflection=False).rms
     predicted = _rms(spectrum.std_calibration)
     print(f"source {name!r} of {run} ({len(cal_data.names)} calibrators):")
-    print(f"  noise floor RMS (Cramer-Rao, radiometer noise): {_mk(floor)}")
+    model = "per channel" if isinstance(solution, ChannelSolution) else "polynomial"
+    print(f"  noise floor RMS (Cramer-Rao, radiometer noise, {model} model): {_mk(floor)}")
     print(f"  predicted calibration std RMS: {_mk(predicted)}")
     print(f"  distance to floor (predicted / floor): {predicted / floor:.3f}")
     truth = read_truth(run)

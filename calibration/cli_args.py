@@ -17,9 +17,7 @@ from .errors import InvalidDataError
 from .model_fit import OrderChoice
 from .noise_waves import PARAMETERS
 from .polynomial_model import Orders
-from .radiometric_solver import solve_radiometric
-from .solution import Solution
-from .thesis_solver import solve_thesis
+from .solvers import METHODS, AnySolution, solver
 
 __all__ = [
     "ORDER_NAMES",
@@ -77,8 +75,19 @@ def add_command(sub: Any, name: str, func: Command, **kwargs: Any) -> argparse.A
 
 def add_solver_options(parser: argparse.ArgumentParser) -> None:
     """``--method``, ``--basis``, ``--orders`` | ``--max-orders``, ``--calibrators``."""
-    parser.add_argument("--method", choices=("radiometric", "thesis"), default="radiometric")
-    parser.add_argument("--basis", choices=("legendre", "power"), default="legendre")
+    parser.add_argument(
+        "--method",
+        choices=METHODS,
+        default="radiometric",
+        help="noise-wave solver (calibration.solvers): polynomial radiometric (default) or "
+        "thesis, or per channel least-squares (thesis 4.7) or bayesian (4.8), which need "
+        ">= 5 calibrators",
+    )
+    parser.add_argument(
+        "--basis",
+        choices=("legendre", "power"),
+        help="polynomial basis of the polynomial solvers (default legendre)",
+    )
     orders = parser.add_mutually_exclusive_group()
     orders.add_argument("--orders", type=orders_arg, help=f"fixed orders ({ORDER_NAMES})")
     orders.add_argument(
@@ -87,8 +96,12 @@ def add_solver_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--calibrators", type=names_arg, help="use only these calibrators")
 
 
-def solver_from_args(args: argparse.Namespace) -> Callable[[CalibrationData], Solution]:
-    """The solve that :func:`add_solver_options`'s options ask for (without the subset)."""
+def solver_from_args(args: argparse.Namespace) -> Callable[[CalibrationData], AnySolution]:
+    """The solve that :func:`add_solver_options`'s options ask for (without the subset).
+
+    Orders, order limits or a basis with a per-channel ``--method`` are refused
+    (:func:`calibration.solvers.solver`).
+    """
     choice = None
     if args.orders is not None:
         choice = OrderChoice.fixed(args.orders)
@@ -96,9 +109,4 @@ def solver_from_args(args: argparse.Namespace) -> Callable[[CalibrationData], So
         if min(args.max_orders) < 1:
             raise InvalidDataError("--max-orders must be >= 1 for every parameter")
         choice = OrderChoice(max_orders=args.max_orders)
-    solver = solve_radiometric if args.method == "radiometric" else solve_thesis
-
-    def solve(data: CalibrationData) -> Solution:
-        return solver(data, choice, basis_kind=args.basis)
-
-    return solve
+    return solver(args.method, choice, args.basis)

@@ -41,7 +41,7 @@ from .noise_waves import INDEX
 from .preparation import excision_flags, smooth_reflection, smoothing_width_hz
 from .rfi import calibrator_flags
 from .simulate import NC346A_ENR_DB
-from .solution import Solution
+from .solvers import AnySolution, band_hz
 
 __all__ = [
     "add_correction_options",
@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 BoolArray = NDArray[np.bool_]
-Solve = Callable[[CalibrationData], Solution]
+Solve = Callable[[CalibrationData], AnySolution]
 
 
 def band_arg(text: str) -> tuple[float, float]:
@@ -176,7 +176,7 @@ def prepare(
 
 def corrected_solve(
     data: CalibrationData, args: argparse.Namespace, solve: Solve
-) -> tuple[CalibrationData, Solution, dict[str, Any]]:
+) -> tuple[CalibrationData, AnySolution, dict[str, Any]]:
     """Prepare ``data``, check or exclude calibrators as asked, solve; print what was done.
 
     Returns the data solved, the solution and metadata to store with it.
@@ -203,17 +203,18 @@ def corrected_solve(
     return data, solve(data), meta
 
 
-def noise_source_line(solution: Solution, freq_hz: NDArray[np.float64] | None = None) -> str:
+def noise_source_line(solution: AnySolution, freq_hz: NDArray[np.float64] | None = None) -> str:
     """The fitted ``T_NS`` against the NC346A's ENR table (thesis fig. 4.20), PASS/FAIL.
 
     ``freq_hz`` defaults to 201 points over the solution's band; the table covers
     30-200 MHz, outside which the check is not made.
     """
-    basis = solution.basis
-    f = np.linspace(basis.f_lo_hz, basis.f_hi_hz, 201) if freq_hz is None else freq_hz
+    f = np.linspace(*band_hz(solution), 201) if freq_hz is None else freq_hz
     lo, hi = min(NC346A_ENR_DB) * 1e6, max(NC346A_ENR_DB) * 1e6
     if f[0] < lo or f[-1] > hi:
         return f"noise source: not checked, the ENR table covers {lo / 1e6:g}-{hi / 1e6:g} MHz"
     fitted = solution.evaluate(f)[INDEX["NS"]]
     sigma = solution.parameter_std(f)[INDEX["NS"]]
+    if not np.all(np.isfinite(sigma)):
+        return "noise source: not checked, the fitted T_NS has no defined error"
     return str(check_noise_source(fitted, f, sigma))

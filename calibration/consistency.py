@@ -73,7 +73,8 @@ from scipy.linalg import cho_factor, cho_solve
 from .data import CalibrationData
 from .errors import CalibrationError, InvalidDataError
 from .noise_waves import INDEX, design_terms, model_q
-from .solution import Solution
+from .per_frequency import ChannelSolution
+from .solvers import AnySolution
 from .validation import LeaveOneOutReport, leave_one_out
 
 __all__ = [
@@ -87,7 +88,7 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-Solve = Callable[[CalibrationData], Solution]
+Solve = Callable[[CalibrationData], AnySolution]
 DEFAULT_ALPHA = 0.01
 DEFAULT_OFFSET_SD_K = 10.0
 
@@ -232,8 +233,12 @@ class HeldOutFit:
         return float(-0.5 * (quad + log_det + self.n * np.log(2 * np.pi)))
 
 
-def held_out_fit(solution: Solution, data: CalibrationData, name: str) -> HeldOutFit:
-    """The forms of :class:`HeldOutFit` for ``name`` calibrated by ``solution`` (without it)."""
+def held_out_fit(solution: AnySolution, data: CalibrationData, name: str) -> HeldOutFit:
+    """The forms of :class:`HeldOutFit` for ``name`` calibrated by ``solution`` (without it).
+
+    A per-channel solution on its own channels has independent errors per channel: ``C``
+    is then diagonal, ``std_calibration^2 + std_measurement^2``.
+    """
     source = data.sources[name]
     spectrum = solution.calibrate(
         data.freq_hz, data.gamma_rec, source,
@@ -242,6 +247,21 @@ def held_out_fit(solution: Solution, data: CalibrationData, name: str) -> HeldOu
     if not np.all(spectrum.std_measurement > 0):
         raise InvalidDataError("a consistency check needs the measurement noise per channel", name)
     error = spectrum.mean - np.asarray(source.temperature_k, dtype=float)
+    if isinstance(solution, ChannelSolution):
+        var = spectrum.std_calibration**2 + spectrum.std_measurement**2
+        if not np.all(np.isfinite(var)):
+            raise InvalidDataError(
+                "the others' per-channel errors are undefined (least squares with exactly 5 "
+                "calibrators)", name,
+            )
+        return HeldOutFit(
+            a=float(np.sum(1.0 / var)),
+            b=float(np.sum(error / var)),
+            c=float(np.sum(error**2 / var)),
+            log_det=float(np.sum(np.log(var))),
+            n=error.size,
+            temperature_var_k2=source.temperature_std_k**2,
+        )
     values, vectors = np.linalg.eigh(solution.posterior.covariance)
     root = vectors * np.sqrt(np.clip(values, 0.0, None))
     w = 1.0 / spectrum.std_measurement
@@ -264,7 +284,14 @@ def held_out_fit(solution: Solution, data: CalibrationData, name: str) -> HeldOu
     )
 
 
-def _log_likelihood(solution: Solution, data: CalibrationData, name: str) -> float:
+def _radiometer_noise(solution: AnySolution) -> bool:
+    """Whether the solution's noise model is the radiometer equation (shape is testable)."""
+    if isinstance(solution, ChannelSolution):
+        return solution.method == "bayesian"
+    return solution.measurement_model == "radiometer"
+
+
+def _log_likelihood(solution: AnySolution, data: CalibrationData, name: str) -> float:
     """``log p(Q of all | others' fit)`` less ``log N(e; ...)`` of ``name`` (module doc)."""
     rest = data.subset(n for n in data.names if n != name)
     theta = solution.evaluate(data.freq_hz)
@@ -290,9 +317,9 @@ def check_consistency(
         raise InvalidDataError(f"the false-alarm rate alpha must be in (0, 1), got {alpha}")
     if not offset_sd_k > 0:
         raise InvalidDataError(f"offset_sd_k must be > 0 K, got {offset_sd_k}")
-    solutions: dict[tuple[str, ...], Solution] = {}
+    solutions: dict[tuple[str, ...], AnySolution] = {}
 
-    def capture(subset: CalibrationData) -> Solution:
+    def capture(subset: CalibrationData) -> AnySolution:
         solution = solve(subset)
         solutions[tuple(subset.names)] = solution
         return solution
@@ -317,7 +344,7 @@ def check_consistency(
                 p_offset=float(2 * stats.norm.sf(abs(z))),
                 p_shape=float(stats.chi2.sf(fit.chi2_shape, fit.n - 1)),
                 ratio=held.ratio,
-                shape_tested=others.measurement_model == "radiometer",
+                shape_tested=_radiometer_noise(others),
                 log_evidence=_log_likelihood(others, data, held.name)
                 + fit.log_predictive(offset_sd_k),
             )
@@ -355,7 +382,7 @@ class Exclusion:
     rounds: tuple[ConsistencyReport, ...]
     excluded: tuple[str, ...]
     calibrators: tuple[str, ...]
-    solution: Solution | None
+    solution: AnySolution | None
     stopped: str
     refused: str | None = None
 

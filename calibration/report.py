@@ -18,6 +18,12 @@ into a directory:
 The calibrators' residuals are in-sample (the solution was fitted to them): a ratio of
 residual to predicted noise near 1 says the noise model is right, not that the
 calibration generalises (``reach-cal validate --leave-one-out`` tests that).
+
+A per-channel solution (``least-squares``, ``bayesian``: :mod:`calibration.solvers`) has
+no orders to compare: its report leaves out the evidence figure and says so in the
+summary, which gives its band-averaged parameters with their per-channel errors and,
+for the Bayesian solver, the summed log evidence; its floor is the per-channel one
+(:func:`calibration.noise_floor.channel_noise_floor`).
 """
 
 from __future__ import annotations
@@ -44,12 +50,13 @@ from .hdf5_io import (
     read_truth,
     software_version,
 )
-from .noise_floor import noise_floor
-from .noise_waves import design_terms, source_temperature
+from .noise_waves import PARAMETERS, design_terms, source_temperature
+from .per_frequency import ChannelSolution
 from .report_render import Section, render_html, render_markdown
 from .run_records import RunRecords, file_software, read_run_records
 from .simulate import ReceiverTruth
-from .solution import CalibratedSpectrum, Solution
+from .solution import CalibratedSpectrum
+from .solvers import AnySolution, method_name, solution_noise_floor
 
 FloatArray = NDArray[np.float64]
 
@@ -65,7 +72,7 @@ LIBRARIES = ("numpy", "scipy", "h5py", "matplotlib")
 class ReportInputs:
     """A solution and, optionally, the run it calibrates with everything the run records."""
 
-    solution: Solution
+    solution: AnySolution
     solution_path: str
     solution_software: str
     run_path: str | None = None
@@ -75,7 +82,7 @@ class ReportInputs:
     records: RunRecords = field(default_factory=RunRecords)
 
 
-def _read_solution(path: PathLike) -> tuple[Solution, str, bool]:
+def _read_solution(path: PathLike) -> tuple[AnySolution, str, bool]:
     """The solution, the writing software, and whether ``path`` is a receiver run file."""
     with h5py.File(path, "r") as f:
         software = file_software(f)
@@ -141,7 +148,35 @@ def _mk(kelvin: float) -> str:
     return f"{kelvin * 1e3:.4g}"
 
 
+#: The summary's note where a per-channel solution's report has no evidence figure.
+NO_EVIDENCE_FIGURE = (
+    "not drawn: a per-channel solution has no polynomial orders whose evidence to compare"
+)
+
+
+def _channel_rows(inputs: ReportInputs, solution: ChannelSolution) -> list[tuple[str, ...]]:
+    numbers = solution.summary()
+    lo, hi = solution.band_hz
+    rows: list[tuple[str, ...]] = [
+        ("solution file", inputs.solution_path),
+        ("run file", inputs.run_path or "none given (--run)"),
+        ("method", f"{method_name(solution)} (per channel)"),
+        ("band (MHz)", f"{lo / 1e6:.3f}-{hi / 1e6:.3f}"),
+        ("channels solved", str(numbers["n_channels"])),
+        ("calibrators", f"{len(solution.calibrators)}: {', '.join(solution.calibrators)}"),
+    ]
+    for name in PARAMETERS:
+        mean, std = numbers["band_mean_k"][name], numbers["channel_std_k"][name]
+        rows.append((f"T_{name} band mean +- per-channel std (K)", f"{mean:.6g} +- {std:.3g}"))
+    if numbers["log_evidence"] is not None:
+        rows.append(("log evidence, sum over channels (nats)", f"{numbers['log_evidence']:.6f}"))
+    rows.append(("evidence figure", NO_EVIDENCE_FIGURE))
+    return rows
+
+
 def _solution_rows(inputs: ReportInputs) -> list[tuple[str, ...]]:
+    if isinstance(inputs.solution, ChannelSolution):
+        return _channel_rows(inputs, inputs.solution)
     solution, post, basis = inputs.solution, inputs.solution.posterior, inputs.solution.basis
     var = post.noise_variance
     if solution.measurement_model == "homoscedastic":
@@ -221,7 +256,7 @@ def _floor_rows(inputs: ReportInputs, calibrated: Calibrated) -> list[tuple[str,
     cal_data = data.subset(used) if used and len(used) == len(solution.calibrators) else data
     rows: list[tuple[str, ...]] = []
     for name, source in inputs.others.items():
-        floor = noise_floor(cal_data, source, solution.parameters, own_reflection=False).rms
+        floor = solution_noise_floor(solution, cal_data, source, own_reflection=False).rms
         predicted = _rms(calibrated.spectra[name].std_calibration)
         actual = "not simulated"
         if inputs.truth is not None:
@@ -279,10 +314,12 @@ def figure_builders(
 ) -> dict[str, Callable[[], Figure]]:
     """The report's figures by file stem, each built when called (one at a time in memory)."""
     truth = inputs.truth.parameters if inputs.truth is not None else None
+    solution = inputs.solution
     builders: dict[str, Callable[[], Figure]] = {
-        "parameters": lambda: figures.noise_wave_parameters(inputs.solution, truth=truth),
-        "evidence": lambda: figures.evidence_landscape(inputs.solution),
+        "parameters": lambda: figures.noise_wave_parameters(solution, truth=truth),
     }
+    if not isinstance(solution, ChannelSolution):  # no orders: NO_EVIDENCE_FIGURE
+        builders["evidence"] = lambda: figures.evidence_landscape(solution)
     data = inputs.data
     if data is None:
         return builders

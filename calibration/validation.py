@@ -29,6 +29,7 @@ from scipy import stats
 from .data import CalibrationData
 from .errors import CalibrationError
 from .solution import Solution
+from .solvers import AnySolution
 
 __all__ = ["HeldOut", "LeaveOneOutReport", "held_out", "leave_one_out"]
 
@@ -96,7 +97,7 @@ def _rms(values: FloatArray) -> float:
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-def held_out(solution: Solution, data: CalibrationData, name: str) -> HeldOut:
+def held_out(solution: AnySolution, data: CalibrationData, name: str) -> HeldOut:
     """Calibrate ``data``'s calibrator ``name`` with ``solution`` and score it (module doc)."""
     source = data.sources[name]
     spectrum = solution.calibrate(
@@ -122,12 +123,12 @@ def held_out(solution: Solution, data: CalibrationData, name: str) -> HeldOut:
         ratio=_rms(error) / rms_predicted,
         inside_68=inside[0],
         inside_95=inside[1],
-        orders=tuple(solution.best_orders),
+        orders=tuple(solution.best_orders) if isinstance(solution, Solution) else (),
     )
 
 
 def leave_one_out(
-    data: CalibrationData, solve: Callable[[CalibrationData], Solution]
+    data: CalibrationData, solve: Callable[[CalibrationData], AnySolution]
 ) -> LeaveOneOutReport:
     """Solve without each calibrator in turn (with ``solve``) and score it as held out."""
     results = []

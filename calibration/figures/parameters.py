@@ -6,7 +6,9 @@
   the left). A model-averaged posterior (:class:`~calibration.averaging.MixturePosterior`)
   gives its bands as quantiles of draws from the mixture (solution files keep its
   components); a single model as Student-t quantiles of
-  :meth:`~calibration.solution.Solution.parameter_std`.
+  :meth:`~calibration.solution.Solution.parameter_std`. A per-channel solution
+  (:class:`~calibration.per_frequency.ChannelSolution`) is drawn on its own channels with
+  Gaussian bands of its per-channel std (undefined errors: no band).
 * :func:`evidence_landscape` (thesis fig. 4.5): the evidence profile over each
   parameter's order, and the leading models with their weights.
 """
@@ -21,8 +23,10 @@ from scipy import stats
 
 from ..averaging import MixturePosterior
 from ..noise_waves import PARAMETERS
+from ..per_frequency import ChannelSolution
 from ..polynomial_model import PolynomialParameters
 from ..solution import Solution
+from ..solvers import AnySolution, method_name
 from .style import (
     BAND_ALPHA,
     LEGEND_ROW_IN,
@@ -52,12 +56,12 @@ LINEAR_NATS = 10.0
 
 
 def parameter_bands(
-    solution: Solution, freq_hz: FloatArray, seed: int = 0
+    solution: AnySolution, freq_hz: FloatArray, seed: int = 0
 ) -> tuple[FloatArray, dict[float, tuple[FloatArray, FloatArray]]]:
     """Posterior mean ``(5, n)`` and, per level, the band's (low, high) about that mean."""
     mean = solution.evaluate(freq_hz)
     bands: dict[float, tuple[FloatArray, FloatArray]] = {}
-    if isinstance(solution.posterior, MixturePosterior):
+    if isinstance(solution, Solution) and isinstance(solution.posterior, MixturePosterior):
         draws = solution.sample_parameters(freq_hz, MIXTURE_DRAWS, np.random.default_rng(seed))
         probabilities = [0.5 + sign * level / 2 for level in LEVELS for sign in (-1, 1)]
         quantiles = np.quantile(draws, probabilities, axis=0) - mean
@@ -65,7 +69,8 @@ def parameter_bands(
             bands[level] = (quantiles[2 * i], quantiles[2 * i + 1])
         return mean, bands
     std = solution.parameter_std(freq_hz)
-    dof = solution.posterior.dof
+    std = np.where(np.isfinite(std), std, np.nan)  # undefined errors: no band
+    dof = solution.posterior.dof if isinstance(solution, Solution) else solution.dof
     for level in LEVELS:
         q = 0.5 + level / 2
         z = float(stats.norm.ppf(q) if np.isinf(dof) else stats.t.ppf(q, dof))
@@ -75,22 +80,23 @@ def parameter_bands(
 
 @styled
 def noise_wave_parameters(
-    solution: Solution,
+    solution: AnySolution,
     freq_hz: FloatArray | None = None,
     truth: PolynomialParameters | None = None,
     n_channels: int = 200,
 ) -> Figure:
     """The five noise-wave parameters (K) against frequency, with 68/95 % bands.
 
-    ``freq_hz`` defaults to ``n_channels`` points over the solution's band; ``truth`` (a
-    simulated receiver's parameters) is drawn on both columns when given.
+    ``freq_hz`` defaults to ``n_channels`` points over the solution's band (a per-channel
+    solution's own channels); ``truth`` (a simulated receiver's parameters) is drawn on
+    both columns when given.
     """
-    basis = solution.basis
-    freq = (
-        np.linspace(basis.f_lo_hz, basis.f_hi_hz, n_channels)
-        if freq_hz is None
-        else np.asarray(freq_hz, dtype=float)
-    )
+    if freq_hz is not None:
+        freq = np.asarray(freq_hz, dtype=float)
+    elif isinstance(solution, ChannelSolution):
+        freq = solution.freq_hz
+    else:
+        freq = np.linspace(solution.basis.f_lo_hz, solution.basis.f_hi_hz, n_channels)
     mean, bands = parameter_bands(solution, freq)
     true = None if truth is None else truth.evaluate(freq)
     fig = new_figure(8.6)
@@ -119,8 +125,11 @@ def noise_wave_parameters(
     handles, labels = axes[0, 0].get_legend_handles_labels()
     more, more_labels = axes[0, 1].get_legend_handles_labels()
     legend_below(fig, handles + more, labels + more_labels, columns=5)
-    orders = ", ".join(map(str, solution.best_orders))
-    suptitle(fig, f"Noise-wave parameters ({solution.method} solver, orders {orders})")
+    if isinstance(solution, ChannelSolution):
+        how = f"{method_name(solution)} solver, per channel"
+    else:
+        how = f"{solution.method} solver, orders {', '.join(map(str, solution.best_orders))}"
+    suptitle(fig, f"Noise-wave parameters ({how})")
     return fig
 
 
