@@ -32,6 +32,8 @@ from pathlib import Path
 from types import FrameType
 
 from calibration.identifiability import prior_dominated_line
+from calibration.per_frequency import ChannelSolution
+from calibration.solvers import AnySolution, method_name
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig, find_site, load_site
 from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
@@ -297,6 +299,25 @@ def _stopping_on_signals(session: RunSession) -> Iterator[None]:
             signal.signal(handled, handler)
 
 
+def _print_solution(solution: AnySolution) -> None:
+    """The solution's lines of the summary: its orders, or what a per-channel one has."""
+    if isinstance(solution, ChannelSolution):
+        numbers = solution.summary()
+        print(
+            f"solution: {method_name(solution)}, per channel ({numbers['n_channels']} channels, "
+            f"{len(solution.calibrators)} calibrators; uncorrelated errors between channels)"
+        )
+        if numbers["log_evidence"] is not None:
+            print(f"  log evidence (sum over channels, eq. 4.22): {numbers['log_evidence']:.3f}")
+        return
+    print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
+    if solution.models_line():
+        print(f"  averaged over models (orders, weight): {solution.models_line()}")
+    if prior_dominated_line(solution):
+        print(f"  {prior_dominated_line(solution)}")
+    print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
+
+
 def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
     print(f"run file: {summary.run_file}")
     print(f"simulated/real time of the run: {hms(summary.elapsed_s)}")
@@ -314,12 +335,7 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
     )
     if corrections_line(handover.corrections):
         print(f"  corrections: {corrections_line(handover.corrections)}")
-    print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
-    if solution.models_line():
-        print(f"  averaged over models (orders, weight): {solution.models_line()}")
-    if prior_dominated_line(solution):
-        print(f"  {prior_dominated_line(solution)}")
-    print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
+    _print_solution(solution)
     floor, predicted = outcome.floor_k, outcome.predicted_k
     print(
         f"  on {outcome.validation.name!r}: noise floor {1e3 * floor:.3f} mK, predicted "

@@ -4,6 +4,7 @@ Keys of the site's ``calibration`` section beside ``band_hz`` (issue 14, item 6)
 
     calibration:
       band_hz: [50.0e+6, 130.0e+6]
+      solver: radiometric      # the calibrate step's default (site.py, calibration.solvers)
       mts: {sources: mts_j1_j2.s2p, lna: mts_j2_j4.s2p}   # two-ports, port 1 at the device
       cables:                  # sources with a cable at its own temperature (eqs. 4.8-4.9)
         hot: {length_m: 0.3, velocity_factor: 0.83, loss_db_per_m: 0.1, thermocouple: 1}
@@ -29,7 +30,7 @@ from typing import Any
 
 from .fields import REQUIRED, Fields
 
-CALIBRATION_KEYS = ("band_hz", "mts", "cables", "rfi")
+CALIBRATION_KEYS = ("band_hz", "solver", "mts", "cables", "rfi")
 _MTS_KEYS = ("sources", "lna")
 _COAX_KEYS = ("length_m", "velocity_factor", "loss_db_per_m", "ref_freq_hz", "loss_exponent")
 _CABLE_KEYS = ("thermocouple", "s2p", *_COAX_KEYS)

@@ -10,8 +10,9 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
       tec: {via: teensy}              # or {via: serial, port: /dev/ttyUSB0}
       tc08: {library: /opt/picotech/lib/libusbtc08.so}
       spectrometer: {host: 0.0.0.0, port: 4660, period_s: 1.0}   # period_s required
-    calibration: {band_hz: [50.0e+6, 130.0e+6]}   # the engine's band (default); corrections:
-                                  # reach_receiver.config.corrections
+    calibration: {band_hz: [50.0e+6, 130.0e+6], solver: radiometric}   # the engine's band
+                                  # and solver (the defaults; calibration.solvers.METHODS);
+                                  # corrections: reach_receiver.config.corrections
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
     thermocouples: {hot: 2}                 # source -> TC-08 port, changes to table 2.2
@@ -36,6 +37,7 @@ from typing import Any
 
 import yaml
 
+from calibration.solvers import METHODS
 from reach_receiver.clock import Clock, CompressedClock, SystemClock
 from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.layout import (
@@ -54,6 +56,8 @@ from .yaml_lines import LineDict, Problem, ProblemsError, load_yaml, with_lines
 
 #: The calibration band when the site does not set one (thesis 4.1: REACH's 50-130 MHz).
 DEFAULT_BAND_HZ = (50e6, 130e6)
+#: The calibrate step's solver when neither the step nor the site names one.
+DEFAULT_SOLVER = METHODS[0]
 #: The site file of the deployed instrument, when neither ``--site`` nor ``$REACH_SITE``.
 SYSTEM_SITE = Path("/etc/reach/site.yaml")
 SITE_ENVIRONMENT = "REACH_SITE"
@@ -83,7 +87,8 @@ class SiteConfig:
     """A checked site file: the place, the instruments, and the front-end's tables.
 
     ``sources`` is table A.2 with the site's changes, ``thermocouples`` table 2.2 with
-    its changes; ``simulation`` holds a ``reach-sim``'s shared clock (empty on site).
+    its changes; ``simulation`` holds a ``reach-sim``'s shared clock (empty on site);
+    ``solver`` the ``calibrate`` step's default solver (:data:`calibration.solvers.METHODS`).
     """
 
     devices: DeviceSettings
@@ -99,6 +104,7 @@ class SiteConfig:
     monitoring: MonitoringSettings = field(default_factory=MonitoringSettings)
     source: str = "<memory>"
     corrections: CorrectionSettings = field(default_factory=CorrectionSettings)
+    solver: str = DEFAULT_SOLVER
 
     def clock(self) -> Clock:
         """The clock the site runs on: a ``reach-sim``'s shared compressed clock, or the wall's."""
@@ -123,7 +129,11 @@ class SiteConfig:
                 for name, settings in vars(self.devices).items()
             },
         }
-        calibration = {"band_hz": list(self.band_hz)} if self.band_hz != DEFAULT_BAND_HZ else {}
+        calibration: dict[str, Any] = (
+            {"band_hz": list(self.band_hz)} if self.band_hz != DEFAULT_BAND_HZ else {}
+        )
+        if self.solver != DEFAULT_SOLVER:
+            calibration["solver"] = self.solver
         if calibration or corrections_yaml(self.corrections):
             document["calibration"] = {**calibration, **corrections_yaml(self.corrections)}
         if self.references:
@@ -192,6 +202,9 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     name = place.text("name", "unnamed site") or "unnamed site"
     devices = _devices(reader)
     band = _band(reader)
+    solver = reader.section("calibration", CALIBRATION_KEYS).choice(
+        "solver", METHODS, DEFAULT_SOLVER
+    )
     corrections = read_corrections(reader.section("calibration", CALIBRATION_KEYS))
     references = reader.section("references", _REFERENCE_KEYS)
     written_references = {k: references.text(k) for k in _REFERENCE_KEYS if references.has(k)}
@@ -204,7 +217,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     thermocouples = _thermocouples(reader)
     daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), source, reader.problems)
     monitoring = read_monitoring(reader.section("monitoring", MONITORING_KEYS), reader.problems)
-    if reader.problems or devices is None or band is None:
+    if reader.problems or devices is None or band is None or solver is None:
         raise SiteError(sorted(dict.fromkeys(reader.problems), key=lambda p: p.line))
     return SiteConfig(
         devices=devices,
@@ -220,6 +233,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         monitoring=monitoring,
         source=source,
         corrections=corrections,
+        solver=solver,
     )
 
 

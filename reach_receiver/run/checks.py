@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import median_filter
 
 from calibration.noise_waves import PARAMETERS
-from calibration.solution import Solution
+from calibration.solvers import NoiseWaveSolution
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -79,7 +79,7 @@ class BenchmarkVerdict:
 
 
 def compare_with_benchmark(
-    solution: Solution, benchmark: Solution, freq_hz: FloatArray, tolerance: float
+    solution: NoiseWaveSolution, benchmark: NoiseWaveSolution, freq_hz: FloatArray, tolerance: float
 ) -> BenchmarkVerdict:
     """Band-averaged parameters of ``solution`` within ``tolerance`` of ``benchmark``'s."""
     new = solution.evaluate(freq_hz).mean(axis=1)

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from calibration.solution import Solution
+from calibration.solvers import AnySolution
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.devices.vna_settings import SweepSettings
@@ -150,7 +150,7 @@ class RunContext:
     )
     path: tuple[int, ...] = ()
     sweep: SweepSettings = field(default_factory=SweepSettings)
-    solution: Solution | None = None
+    solution: AnySolution | None = None
     temperatures: TemperatureLogger | None = None
     checks: list[CheckRecord] = field(default_factory=list)
     calibration: CalibrationOutcome | None = None

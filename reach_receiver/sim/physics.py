@@ -34,7 +34,7 @@ from calibration.data import CalibrationData, SourceData
 from calibration.noise_waves import dicke_powers
 from calibration.reflections import lna_reflection, reach_source_reflection, resistor
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, ReceiverTruth, enr_noise_temperature
-from calibration.solution import Solution
+from calibration.solvers import NoiseWaveSolution
 from reach_receiver.clock import Clock
 from reach_receiver.frontend.layout import (
     MS2_TO_LNA,
@@ -335,7 +335,7 @@ class ReceiverPhysics:
         return effective
 
     def calibration_error_k(
-        self, solution: Solution, data: CalibrationData, source: SourceData
+        self, solution: NoiseWaveSolution, data: CalibrationData, source: SourceData
     ) -> float:
         """RMS over the band of ``T_cal(Q) - T_true(Q)`` for ``source`` (kelvin).
 

@@ -23,7 +23,7 @@ import numpy as np
 from calibration.data import CalibrationData, SourceData
 from calibration.errors import FileFormatError
 from calibration.hdf5_io import RECEIVER_RUN_FORMAT, read_run, read_solution_group
-from calibration.solution import Solution
+from calibration.solvers import AnySolution
 
 from .merge import (
     RUN_FILE,
@@ -106,8 +106,8 @@ class RunContents:
         with h5py.File(measurement.file, "r") as f:
             return _arrays(f[measurement.location])
 
-    def solution(self) -> Solution | None:
-        """The latest calibration solution of the run, if one was made."""
+    def solution(self) -> AnySolution | None:
+        """The latest calibration solution of the run (of any solver), if one was made."""
         found = self.of_kind("solution")
         if not found:
             return None

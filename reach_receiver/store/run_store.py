@@ -44,7 +44,7 @@ import numpy as np
 
 from calibration.data import CalibrationData, SourceData
 from calibration.hdf5_io import RunLayout, write_solution_group
-from calibration.solution import Solution
+from calibration.solvers import AnySolution
 
 from .handover import RECEIVER, HandOver, engine_layout, select
 from .merge import RUN_FILE, Record, merge_run
@@ -459,7 +459,7 @@ class RunStore:
 
     def add_solution(
         self,
-        solution: Solution,
+        solution: AnySolution,
         *,
         timestamp: float,
         verification: Mapping[str, Any],

@@ -1,7 +1,9 @@
 """``calibrate``: the calibration engine inside the loop.
 
-``{f_lo_hz: 50e6, f_hi_hz: 130e6, benchmark: previous.h5, tolerance: 0.05}``. The run's
-measurements so far go to :func:`calibration.solve_radiometric` through the store's
+``{f_lo_hz: 50e6, f_hi_hz: 130e6, solver: radiometric, benchmark: previous.h5,
+tolerance: 0.05}``. The run's measurements so far go to the solver ``solver`` names
+(:mod:`calibration.solvers`: ``radiometric``, ``thesis``, ``least-squares`` or
+``bayesian``; default the site's ``calibration.solver``, else ``radiometric``) through the store's
 hand-over (:mod:`reach_receiver.store.handover`: every Dicke cycle of each source, the
 latest calibrated S11s, the calibrators' thermocouple temperatures), the same hand-over
 that ``reach-cal solve run.h5`` reads, so the two give the same solution. The band is
@@ -26,13 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration import CalibrationData, solve_radiometric
+from calibration import CalibrationData
 from calibration.data import SourceData
-from calibration.errors import FileFormatError
+from calibration.errors import FileFormatError, IllPosedError
 from calibration.hdf5_io import read_solution
-from calibration.noise_floor import noise_floor
 from calibration.reflection_noise import reflection_variance
-from calibration.solution import Solution
+from calibration.solvers import METHODS, AnySolution, solution_noise_floor, solver
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
@@ -52,7 +53,8 @@ class Calibrate(Step):
 
     With a ``benchmark`` solution file, the new solution is verified against it: every
     parameter's band-averaged value within ``tolerance`` (thesis 2.1.3: 5 %). ``f_lo_hz``
-    and ``f_hi_hz`` default to the site's band.
+    and ``f_hi_hz`` default to the site's band, ``solver`` (one of
+    :data:`calibration.solvers.METHODS`) to the site's solver.
     """
 
     benchmark: Path | None = None
@@ -60,6 +62,7 @@ class Calibrate(Step):
     f_lo_hz: float | None = None
     f_hi_hz: float | None = None
     corrections: Chosen = ALL_CORRECTIONS
+    solver: str | None = None
 
 
 @dataclass(frozen=True)
@@ -71,9 +74,11 @@ class CalibrationOutcome:
     error (posterior); both hold the VNA's trace noise on the validation source's and the
     receiver's reflections where the run file states it (a per-channel error of the
     calibrated source that no calibration removes), and neither its radiometer noise.
+    The floor is that of the solution's own kind of model
+    (:func:`calibration.solvers.solution_noise_floor`: polynomial or per channel).
     """
 
-    solution: Solution
+    solution: AnySolution
     data: CalibrationData
     validation: SourceData
     handover: HandOver
@@ -81,7 +86,7 @@ class CalibrationOutcome:
     predicted_k: float
 
 
-def benchmark_solution(path: Path) -> Solution:
+def benchmark_solution(path: Path) -> AnySolution:
     """A benchmark solution: a solution file (``reach-cal solve``) or an earlier run file."""
     try:
         return read_solution(path)
@@ -93,9 +98,12 @@ def benchmark_solution(path: Path) -> Solution:
 
 
 def calibrate(
-    run: RunContext, band_hz: tuple[float, float], chosen: Chosen = ALL_CORRECTIONS
+    run: RunContext,
+    band_hz: tuple[float, float],
+    chosen: Chosen = ALL_CORRECTIONS,
+    method: str = "radiometric",
 ) -> CalibrationOutcome:
-    """Solve the run so far over ``band_hz``, corrected as ``chosen`` and the site say."""
+    """Solve the run so far over ``band_hz`` with ``method``, corrected as asked."""
     view = run.store.engine_view(band_hz)
     handover = view.handover
     if RECEIVER not in handover.s11:
@@ -113,7 +121,10 @@ def calibrate(
     )
     if report:
         handover = dataclasses.replace(handover, corrections=report)
-    solution = solve_radiometric(data)
+    try:
+        solution = solver(method)(data)
+    except IllPosedError as err:  # e.g. a per-channel solver with fewer than 5 calibrators
+        raise CheckFailed(f"the {method} solver cannot solve this run: {err}") from err
     validation = others.get(ANTENNA) or data.sources[data.names[0]]
     spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, validation)
     reflections = reflection_variance(
@@ -125,7 +136,7 @@ def calibrate(
         data=data,
         validation=validation,
         handover=handover,
-        floor_k=noise_floor(data, validation, solution.parameters).rms,
+        floor_k=solution_noise_floor(solution, data, validation).rms,
         predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2 + reflections))),
     )
 
@@ -135,12 +146,13 @@ class CalibrateKind(RunnableKind[Calibrate]):
 
     name = "calibrate"
     step_type = Calibrate
-    keys = ("benchmark", "tolerance", "f_lo_hz", "f_hi_hz", "mts", "cables", "rfi")
+    keys = ("benchmark", "tolerance", "f_lo_hz", "f_hi_hz", "mts", "cables", "rfi", "solver")
     needs_devices = False
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> Calibrate:
-        """The band (default the site's), a benchmark solution and its tolerance."""
+        """The band and the solver (default the site's), a benchmark and its tolerance."""
         benchmark = f.text("benchmark", None)
+        method = f.choice("solver", METHODS, None)
         low = f.number("f_lo_hz", None, low=0.0, open_low=True) if f.has("f_lo_hz") else None
         high = f.number("f_hi_hz", None, low=0.0, open_low=True) if f.has("f_hi_hz") else None
         band = ctx.site.band_hz if ctx.site is not None else None
@@ -161,15 +173,17 @@ class CalibrateKind(RunnableKind[Calibrate]):
             f_lo_hz=low,
             f_hi_hz=high,
             corrections=Chosen(**switches),
+            solver=method,
         )
 
     def describe(self, step: Calibrate) -> str:
-        """The band, when the step sets it."""
+        """The band and the solver, when the step sets them."""
+        how = f", {step.solver} solver" if step.solver is not None else ""
         if step.f_lo_hz is None and step.f_hi_hz is None:
-            return "calibrate (the site's band)"
+            return f"calibrate (the site's band{how})"
         lo = "site" if step.f_lo_hz is None else f"{step.f_lo_hz / 1e6:g}"
         hi = "site" if step.f_hi_hz is None else f"{step.f_hi_hz / 1e6:g}"
-        return f"calibrate {lo}-{hi} MHz"
+        return f"calibrate {lo}-{hi} MHz{how}"
 
     def duration(self, step: Calibrate, walk: TimingWalk) -> float:
         """10 s."""
@@ -184,7 +198,7 @@ class CalibrateKind(RunnableKind[Calibrate]):
         lo, hi = run.site.band_hz
         band = (step.f_lo_hz or lo, step.f_hi_hz or hi)
         run.progress.update(f"calibrating {band[0] / 1e6:g}-{band[1] / 1e6:g} MHz", 0, 1, None)
-        outcome = calibrate(run, band, step.corrections)
+        outcome = calibrate(run, band, step.corrections, step.solver or run.site.solver)
         verification: dict[str, object] = {}
         if step.benchmark is not None:
             verdict = compare_with_benchmark(

@@ -17,6 +17,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from calibration.solvers import band_hz
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
@@ -47,7 +48,7 @@ def calibrate_cycle(run: RunContext, source: str, number: int, name: str, thresh
     solution = run.solution
     if solution is None:
         return
-    band = (solution.basis.f_lo_hz, solution.basis.f_hi_hz)
+    band = band_hz(solution)
     view = run.store.engine_view(band, cycles={source: [number]})
     if view.layout is None or source not in view.others:
         log.warning("observe: %s not calibrated (%s)", name, "; ".join(view.handover.warnings))
