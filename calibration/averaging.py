@@ -154,7 +154,13 @@ def mixture_posterior(
         variances = prior.variances(orders)[g]
         posteriors.append(solve(normal, orders, np.zeros(variances.size), variances, scale_prior))
         weights.append(weight)
-    w = np.asarray(weights)
+    return mixture_of(posteriors, np.asarray(weights), log_evidence, normal.n_rows)
+
+
+def mixture_of(
+    posteriors: Sequence[LinearPosterior], w: FloatArray, log_evidence: float, n_rows: int
+) -> MixturePosterior:
+    """The mixture of ``posteriors`` with normalised weights ``w``: its moments in the envelope."""
     envelope: Orders = tuple(  # type: ignore[assignment]
         max(p.orders[k] for p in posteriors) for k in range(len(posteriors[0].orders))
     )
@@ -180,7 +186,7 @@ def mixture_posterior(
         log_evidence=log_evidence,
         noise_variance=float(w @ [p.noise_variance for p in posteriors]),
         chi2=float(w @ [p.chi2 for p in posteriors]),
-        n_rows=normal.n_rows,
+        n_rows=n_rows,
         components=tuple(posteriors),
         weights=w,
     )

@@ -199,6 +199,10 @@ class CalibrationData:
     Every calibrator needs a temperature. Arrays are checked and coerced on construction.
     ``gamma_rec_std`` is the complex rms random error of ``gamma_rec`` per channel (or a
     scalar), as :attr:`SourceData.gamma_std` is of a source's; ``None`` when not known.
+    ``reflection_correlation_channels`` is how many neighbouring channels share one
+    reflection error (1: independent per channel; an S11 sweep of step ``d`` interpolated
+    onto channels of width ``w`` shares each point's error over ``d / w`` channels), which
+    the posterior needs (:mod:`calibration.correlated_reflections`).
     """
 
     freq_hz: FloatArray
@@ -207,6 +211,7 @@ class CalibrationData:
     channel_width_hz: float
     metadata: Mapping[str, Any] = field(default_factory=dict)
     gamma_rec_std: FloatArray | float | None = None
+    reflection_correlation_channels: float = 1.0
 
     def __post_init__(self) -> None:
         freq = np.asarray(self.freq_hz, dtype=float)
@@ -223,6 +228,12 @@ class CalibrationData:
             if np.any(rec_std < 0):
                 raise InvalidDataError("reflection error must be >= 0", "receiver")
             object.__setattr__(self, "gamma_rec_std", rec_std)
+        if not (np.isfinite(self.reflection_correlation_channels)
+                and self.reflection_correlation_channels >= 1):
+            raise InvalidDataError(
+                "reflection_correlation_channels must be >= 1 (channels sharing one "
+                f"reflection error), got {self.reflection_correlation_channels}"
+            )
         if not (np.isfinite(self.channel_width_hz) and self.channel_width_hz > 0):
             raise InvalidDataError(f"channel width must be > 0, got {self.channel_width_hz}")
         if not self.sources:

@@ -251,6 +251,7 @@ def write_run(
             channel_width_hz=float(data.channel_width_hz),
             calibrators=list(data.names),
             sources=list(sources),
+            reflection_correlation_channels=float(data.reflection_correlation_channels),
         )
         temps = meta.create_group("temperatures")
         for name, src in sources.items():
@@ -337,6 +338,7 @@ class RunLayout:
     metadata: Mapping[str, Any]
     path: str
     gamma_rec_std: NDArray[np.float64] | None = None
+    reflection_correlation_channels: float = 1.0
 
     def split(self) -> tuple[CalibrationData, dict[str, SourceData]]:
         """The calibrators as a checked run, and the other sources (checked) by name."""
@@ -344,7 +346,7 @@ class RunLayout:
             cals = {n: self.sources[n] for n in self.calibrators}
             data = CalibrationData(
                 self.freq_hz, self.gamma_rec, cals, self.channel_width_hz, self.metadata,
-                self.gamma_rec_std,
+                self.gamma_rec_std, self.reflection_correlation_channels,
             )
             return data, self.others()
         except InvalidDataError as err:
@@ -391,8 +393,11 @@ def read_run_layout(f: Any, path: PathLike) -> RunLayout:
     except InvalidDataError as err:
         raise _in_file(err, path) from err
     rec_std = _array(obs, "lna_s11_std", path).astype(float) if "lna_s11_std" in obs else None
+    # channels sharing one reflection error (older files: independent, 1)
+    shared = float(meta.attrs.get("reflection_correlation_channels", 1.0))
     return RunLayout(
-        freq, gamma_rec, width, sources, tuple(calibrators), run_metadata, str(path), rec_std
+        freq, gamma_rec, width, sources, tuple(calibrators), run_metadata, str(path), rec_std,
+        shared,
     )
 
 

@@ -67,6 +67,13 @@ def _project_pairs(
     return gram
 
 
+def weighted_gram(
+    features: FloatArray, weights: FloatArray, basis: FloatArray, max_orders: Sequence[int]
+) -> FloatArray:
+    """``sum_if w_if x_if x_if^T`` in the ``max_orders`` layout, for any row weights."""
+    return _project_pairs(features, weights, basis, as_orders(max_orders))
+
+
 def _project_vector(
     features: FloatArray, weighted_residual: FloatArray, basis: FloatArray, max_orders: Orders
 ) -> FloatArray:

@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 from .averaging import MixturePosterior
 from .basis import BasisKind, PolynomialBasis
 from .conjugate import CoefficientPrior, ScalePrior
+from .correlated_reflections import shared_error_excess, widen
 from .data import CalibrationData
 from .errors import IllPosedError
 from .identifiability import (
@@ -60,7 +61,7 @@ from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
-from .reflection_noise import reflection_variance
+from .reflection_noise import receiver_slopes, reflection_variance, temperature_variance
 from .shrinkage import ShrinkagePrior
 from .solution import Solution
 
@@ -115,6 +116,38 @@ def linearise(
         features=terms.matrix(q0),
         weights=1.0 / (gain**2 * var_q + extra_variance_k2),
         response=temps - gain * (q - q0),
+    )
+
+
+@dataclass
+class _LastRows:
+    """The last linearisation's rows, reflection variances, basis and layout."""
+
+    problem: LinearisedProblem | None = None
+    theta: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    basis: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    largest: Orders = ()  # type: ignore[assignment]
+
+
+def _shared_errors(
+    data: CalibrationData, last: _LastRows, gammas: NDArray[np.complex128], q: FloatArray
+) -> FloatArray:
+    """The posterior's share of reflection errors shared between rows (correlated_reflections)."""
+    assert last.problem is not None
+    theta = last.theta[:, None, :]
+    gamma_std = data.reflection_errors()
+    source = (
+        None if gamma_std is None
+        else temperature_variance(theta, gammas, data.gamma_rec, q, gamma_std[:, :])
+    )
+    slopes = (
+        None if data.gamma_rec_std is None
+        else receiver_slopes(theta, gammas, data.gamma_rec, q)
+    )
+    return shared_error_excess(
+        last.problem.features, last.problem.weights, last.basis, last.largest,
+        data.reflection_correlation_channels, source, slopes,
+        None if data.gamma_rec_std is None else np.asarray(data.gamma_rec_std),
     )
 
 
@@ -179,6 +212,10 @@ def solve_radiometric(
             return 1.0 / coefficient_prior.widest_variances(orders)
         return 1.0 / coefficient_prior.vectors(orders)[1]
 
+    # The last linearisation's rows and reflection variances, for the posterior's share
+    # of reflection errors shared by neighbouring channels (correlated_reflections).
+    last = _LastRows()
+
     def build(largest: Orders) -> NormalEquations:
         b = basis.matrix(data.freq_hz, max(largest))
         # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
@@ -191,6 +228,7 @@ def solve_radiometric(
             )
             problem = linearise(terms, temps, q, var_q, theta, extra)
             normal = _normal_equations(problem, b, largest, ridge(largest), offset_var)
+            last.problem, last.theta, last.basis, last.largest = problem, theta, b, largest
         return normal
 
     # Whether the largest model's fit keeps T_NS positive: only then may it join the
@@ -221,6 +259,9 @@ def solve_radiometric(
     )
     posterior, table = result.posterior, result.table
     metadata: dict[str, object] = dict(result.limits_metadata())
+    if last.problem is not None and (gamma_std is not None or data.gamma_rec_std is not None):
+        posterior = widen(posterior, _shared_errors(data, last, gammas, q), last.largest)
+        metadata["reflection_correlation_channels"] = data.reflection_correlation_channels
     best = max(table, key=table.__getitem__)
     metadata["best_orders"] = list(best)
     if isinstance(posterior, MixturePosterior):

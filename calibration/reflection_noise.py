@@ -18,12 +18,13 @@ moves ``T`` the same way with ``J = dT / d(Re, Im) Gamma_rec``
 (:func:`receiver_temperature_variance`). That error is common to every source at a
 channel: for a calibrated source it is a variance of its own, per channel, which no fit of
 smooth parameters can absorb, and the predictive carries it; in the calibrators' rows it
-is treated as independent between sources (the fit sees it only through the residuals of
-smooth polynomials across channels, where the correlation between sources at one channel
-does not bias it). Two errors on different sweeps are independent and their variances add.
+sits in each row's variance (it does not bias the fit), and its correlation between the
+sources at one channel, and between neighbouring channels when a sweep is interpolated
+onto them, enter the posterior's covariance (:mod:`calibration.correlated_reflections`).
+Two errors on different sweeps are independent and their variances add.
 
-Not covered: the VNA's systematic errors (thesis table 2.3), which are correlated across
-channels.
+The VNA's systematic errors (thesis table 2.3), correlated across channels and sweeps,
+are :mod:`calibration.vna_systematics`'.
 """
 
 from __future__ import annotations
@@ -70,12 +71,9 @@ def receiver_temperature_variance(
     gamma_rec_std: ArrayLike,
 ) -> FloatArray:
     """``var_T`` (K^2) from the receiver reflection's error ``gamma_rec_std`` (module docstring)."""
-    g_rec = np.asarray(gamma_rec, dtype=complex)
-
-    def temperature(step: complex) -> FloatArray:
-        return np.asarray(source_temperature(theta, design_terms(gamma, g_rec + step), q))
-
-    return _variance(temperature, gamma_rec_std)
+    j_re, j_im = receiver_slopes(theta, gamma, gamma_rec, q)
+    sigma = np.asarray(gamma_rec_std, dtype=float)
+    return np.asarray((j_re**2 + j_im**2) * sigma**2 / 2.0, dtype=float)
 
 
 def reflection_variance(
@@ -95,13 +93,30 @@ def reflection_variance(
     return out
 
 
-def _variance(temperature: Callable[[complex], FloatArray], std: ArrayLike) -> FloatArray:
-    """``(J_re^2 + J_im^2) sigma^2 / 2`` with ``J`` by central differences of ``temperature``."""
+def receiver_slopes(
+    theta: FloatArray, gamma: ArrayLike, gamma_rec: ArrayLike, q: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """``J = dT / d(Re, Im) Gamma_rec`` (K per unit reflection), each of ``gamma``'s shape."""
+    g_rec = np.asarray(gamma_rec, dtype=complex)
+
+    def temperature(step: complex) -> FloatArray:
+        return np.asarray(source_temperature(theta, design_terms(gamma, g_rec + step), q))
+
+    return _slopes(temperature)
+
+
+def _slopes(temperature: Callable[[complex], FloatArray]) -> tuple[FloatArray, FloatArray]:
+    """``(J_re, J_im)`` by central differences of ``temperature``."""
 
     def slope(step: complex) -> FloatArray:
         return (temperature(step) - temperature(-step)) / (2 * STEP)
 
-    j_re, j_im = slope(STEP), slope(1j * STEP)
+    return slope(STEP), slope(1j * STEP)
+
+
+def _variance(temperature: Callable[[complex], FloatArray], std: ArrayLike) -> FloatArray:
+    """``(J_re^2 + J_im^2) sigma^2 / 2`` with ``J`` by central differences of ``temperature``."""
+    j_re, j_im = _slopes(temperature)
     sigma = np.asarray(std, dtype=float)
     return np.asarray((j_re**2 + j_im**2) * sigma**2 / 2.0, dtype=float)
 

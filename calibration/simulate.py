@@ -7,7 +7,10 @@ receiver reflection) and the reflection models of :mod:`calibration.reflections`
 2. radiometer noise on every spectrum, ``sigma_P = P / sqrt(B tau)`` with ``B`` the channel
    width and ``tau`` the integration time of that Dicke position;
 3. optionally complex Gaussian noise of standard deviation ``vna_sigma`` on every measured
-   reflection coefficient (the powers use the true ones).
+   reflection coefficient (the powers use the true ones): per channel, or, with
+   ``vna_step_channels = L > 1``, at sweep points every ``L`` channels and carried onto the
+   channels by cubic splines as the hand-over does, so that neighbouring channels share it
+   (:func:`vna_reading`).
 
 The default band and channels are the REACH ones: 50-130 MHz at 400 MSPS / 32768 =
 12.207 kHz (6554 channels). The simulated receiver of ``reach_receiver.sim`` reuses
@@ -21,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 
 from .basis import BasisKind, PolynomialBasis
 from .data import CalibrationData, Integration, SourceData
@@ -144,6 +148,7 @@ class SimulationConfig:
     t_ambient_k: float = 298.0
     t_hot_k: float = 370.0
     vna_sigma: float = 0.0
+    vna_step_channels: int = 1
     radiometer_noise: bool = True
     truth_coefficients: dict[str, list[float]] | None = field(default=None, hash=False)
     truth_basis: BasisKind = "legendre"
@@ -168,6 +173,30 @@ class SimulationConfig:
         return self.t_hot_k if name == "hot" else self.t_ambient_k
 
 
+def vna_reading(
+    gamma_true: ComplexArray, sigma: float, rng: np.random.Generator, step_channels: int = 1
+) -> ComplexArray:
+    """``gamma_true`` as a VNA reads it: circular complex noise of rms ``sigma``.
+
+    With ``step_channels = L > 1`` the noise is drawn at every ``L``-th channel (and the
+    last), the sweep's points, and the noisy points are carried onto every channel by
+    cubic splines through their real and imaginary parts.
+    """
+    g = np.asarray(gamma_true, dtype=complex)
+    if step_channels <= 1:
+        noise = rng.standard_normal(g.shape) + 1j * rng.standard_normal(g.shape)
+        return np.asarray(g + sigma * noise / np.sqrt(2))
+    nodes = np.arange(0, g.size, step_channels)
+    if nodes[-1] != g.size - 1:
+        nodes = np.append(nodes, g.size - 1)
+    noise = rng.standard_normal(nodes.shape) + 1j * rng.standard_normal(nodes.shape)
+    read = g[nodes] + sigma * noise / np.sqrt(2)
+    x = np.arange(g.size, dtype=float)
+    spline_re = CubicSpline(nodes.astype(float), read.real)(x)
+    spline_im = CubicSpline(nodes.astype(float), read.imag)(x)
+    return np.asarray(spline_re + 1j * spline_im, dtype=complex)
+
+
 def simulate_source(
     name: str,
     freq_hz: FloatArray,
@@ -180,6 +209,7 @@ def simulate_source(
     rng: np.random.Generator | None,
     vna_sigma: float = 0.0,
     known_temperature: bool = True,
+    vna_step_channels: int = 1,
 ) -> SourceData:
     """One source's Dicke cycle: powers with radiometer noise (``rng=None``: noiseless)."""
     theta = truth.theta(freq_hz)
@@ -200,9 +230,7 @@ def simulate_source(
             noisy.append(p + rng.standard_normal(p.shape) * p / np.sqrt(channel_width_hz * tau))
     gamma = np.array(gamma_true, dtype=complex)
     if rng is not None and vna_sigma > 0:
-        gamma = gamma + vna_sigma * (
-            rng.standard_normal(gamma.shape) + 1j * rng.standard_normal(gamma.shape)
-        ) / np.sqrt(2)
+        gamma = vna_reading(gamma, vna_sigma, rng, vna_step_channels)
     temp = np.broadcast_to(np.asarray(temperature_k, dtype=float), freq_hz.shape).copy()
     known_error = vna_sigma if rng is not None and vna_sigma > 0 else None
     return SourceData(
@@ -248,9 +276,7 @@ def simulate_run(
     gamma_rec_true = lna_reflection(freq, config.f_lo_hz, config.f_hi_hz)
     gamma_rec = gamma_rec_true
     if rng is not None and config.vna_sigma > 0:
-        gamma_rec = gamma_rec_true + config.vna_sigma * (
-            rng.standard_normal(freq.shape) + 1j * rng.standard_normal(freq.shape)
-        ) / np.sqrt(2)
+        gamma_rec = vna_reading(gamma_rec_true, config.vna_sigma, rng, config.vna_step_channels)
     noise_rng = rng if config.radiometer_noise else None
 
     def make(name: str, source_rng: np.random.Generator | None, known: bool) -> SourceData:
@@ -266,6 +292,7 @@ def simulate_run(
             source_rng,
             config.vna_sigma if rng is not None else 0.0,
             known,
+            config.vna_step_channels,
         )
 
     sources = {name: make(name, noise_rng, True) for name in config.calibrators}
@@ -276,6 +303,7 @@ def simulate_run(
         channel_width_hz=config.channel_width_hz,
         metadata={"simulated": True, "integration_s": config.integration_s},
         gamma_rec_std=config.vna_sigma if rng is not None and config.vna_sigma > 0 else None,
+        reflection_correlation_channels=float(max(config.vna_step_channels, 1)),
     )
     t_val = np.full(freq.shape, config.temperature_k(validation))
     return SimulatedRun(

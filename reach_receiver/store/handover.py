@@ -34,10 +34,11 @@ imaginary parts (:func:`interpolate_s11`): the REACH sources' reflections are sm
 on the VNA's grid (the 10 m cable's ripple has a period of about 10 MHz). Each sweep's
 trace noise, estimated from its own scatter on the VNA's grid
 (:func:`calibration.reflection_noise.trace_noise`), goes beside it as ``{src}_s11_std``
-(``lna_s11_std``), so that the solver, the error bars and the floor carry it. The spline
-spreads one VNA point's error over the ~8 channels between points: the per-channel
-variance is right, the engine's independence between channels is not (the fit, which
-averages thousands of channels, sees these errors a little too reduced).
+(``lna_s11_std``), so that the solver, the error bars and the floor carry it; how many
+channels share one sweep point's error goes beside them (``reflection_correlation_channels``
+of ``observation_metadata``: the sweep step over the channel width, ~8 for REACH), which
+the posterior's covariance needs: a fit averaging thousands of channels sees an error
+shared by 8 of them 8 times less reduced than independent ones.
 """
 
 from __future__ import annotations
@@ -328,10 +329,25 @@ def write_layout(f: Any, groups: Groups, handover: HandOver) -> None:
         channel_width_hz=handover.channel_width_hz,
         sources=_str_array(handover.sources),
         calibrators=_str_array(handover.calibrators),
+        reflection_correlation_channels=_shared_channels(groups, handover),
         band_hz=np.array(handover.band_hz),
         handover=handover.to_json(),
     )
     obs.attrs["warnings"] = _str_array(handover.warnings)
+
+
+def _shared_channels(groups: Groups, handover: HandOver) -> float:
+    """Channels that share one sweep point's error: the widest S11 step / channel width.
+
+    The splines carry each point's trace noise onto the channels around it
+    (:mod:`calibration.correlated_reflections`); 1 where a sweep is finer than the channels.
+    """
+    steps = [
+        float(np.median(np.diff(groups[number]["frequencies"][()])))
+        for number in handover.s11.values()
+        if groups[number]["frequencies"].size > 1
+    ]
+    return max([1.0] + [step / handover.channel_width_hz for step in steps])
 
 
 def _mean_time(group: Any, position: str) -> float:
