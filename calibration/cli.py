@@ -9,6 +9,7 @@
                     [--band LO,HI] [--mask-band LO,HI] [--rfi] [--smooth-s11 P]
                     [--check-consistency | --exclude-inconsistent [N]]  (cli_corrections)
     reach-cal apply SOLUTION.h5 RUN.h5 [--source ant] [-o OUT.h5] [--csv OUT.csv]
+                    [--vna-accuracy DRAWS [--vna-correlation-mhz C] [--seed N]]
     reach-cal summary SOLUTION.h5 [--run RUN.h5 --source ant]
     reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,...  (calibration.cli_import)
     reach-cal import vna DIR -o OUT_DIR --devices a,b,...
@@ -63,6 +64,7 @@ from .polynomial_model import coefficient_slices
 from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .solution import CalibratedSpectrum, Solution
 from .solvers import AnySolution, band_hz, method_name, solution_noise_floor
+from .vna_systematics import DEFAULT_CORRELATION_HZ, fixed_model, reflection_systematics
 
 PROG = "reach-cal"
 
@@ -214,7 +216,14 @@ def _noise_line(solution: Solution) -> str:
 def cmd_apply(args: argparse.Namespace) -> int:
     """Calibrate a source of a run with a solution."""
     solution = read_solution(args.solution)
-    _, _, spectrum = _calibrate(solution, args.run, args.source)
+    data, source, spectrum = _calibrate(solution, args.run, args.source)
+    systematics = None
+    if args.vna_accuracy:
+        systematics = reflection_systematics(
+            data, {args.source: source}, fixed_model(solution), args.seed, args.vna_accuracy,
+            correlation_hz=args.vna_correlation_mhz * 1e6,
+        )
+        spectrum = spectrum.with_systematics(systematics.deviations[args.source])
     if args.output:
         files = {"solution_file": str(args.solution), "run_file": str(args.run)}
         write_calibrated(args.output, spectrum, args.source, attrs=files)
@@ -227,7 +236,10 @@ def cmd_apply(args: argparse.Namespace) -> int:
     print(
         f"RMS std: total {_mk(_rms(spectrum.std))}, calibration "
         f"{_mk(_rms(spectrum.std_calibration))}, measurement {_mk(_rms(spectrum.std_measurement))}"
+        + (f", VNA systematic {_mk(_rms(spectrum.std_systematic))}" if systematics else "")
     )
+    if systematics:
+        print(f"VNA systematic: {systematics.describe()}")
     for path in (args.output, args.csv):
         if path:
             print(f"wrote {path}")
@@ -243,10 +255,11 @@ def _write_csv(path: Path, spectrum: CalibratedSpectrum) -> None:
             spectrum.std,
             spectrum.std_calibration,
             spectrum.std_measurement,
+            spectrum.std_systematic,
         ]
     )
     tmp = path.with_name(f".{path.name}.tmp")
-    header = "freq_hz,mean_k,std_k,std_calibration_k,std_measurement_k"
+    header = "freq_hz,mean_k,std_k,std_calibration_k,std_measurement_k,std_systematic_k"
     np.savetxt(tmp, table, delimiter=",", header=header, comments="", fmt="%.10g")
     os.replace(tmp, path)
 
@@ -391,6 +404,16 @@ def build_parser() -> argparse.ArgumentParser:
         "-o", "--output", type=output_arg, help="calibrated spectrum to write (HDF5)"
     )
     apply.add_argument("--csv", type=output_arg, help="calibrated spectrum to write (CSV)")
+    apply.add_argument(
+        "--vna-accuracy", type=int, default=0, metavar="DRAWS",
+        help="add the VNA's data-sheet accuracy (thesis table 2.3) as a systematic error, "
+        "from DRAWS Monte-Carlo refits (64 is typical; 0, the default, leaves it out)",
+    )
+    apply.add_argument(
+        "--vna-correlation-mhz", type=float, default=DEFAULT_CORRELATION_HZ / 1e6,
+        help="correlation length of that error over frequency (default %(default)g MHz)",
+    )
+    apply.add_argument("--seed", type=int, default=0, help="seed of the Monte-Carlo draws")
 
     summary = command("summary", cmd_summary)
     summary.add_argument("solution", help="solution file (HDF5)")

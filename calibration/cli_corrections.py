@@ -9,8 +9,7 @@
 In this order, before the solve: ``--band`` keeps the channels in ``LO-HI`` MHz;
 ``--mask-band`` drops those in a band of known interference (repeatable;
 :func:`calibration.preparation.excision_flags`); ``--rfi`` flags spikes in each
-calibrator's load and noise-source spectra (:func:`calibration.rfi.flag_spectrum`, 5
-sigma; not yet the source position's, see :func:`calibration.rfi.calibrator_flags`) and
+calibrator's three Dicke spectra (:func:`calibration.rfi.calibrator_flags`, 5 sigma) and
 drops the channels flagged in any of them from every calibrator, saying how many per source;
 ``--smooth-s11 P`` replaces every reflection (calibrators' and the receiver's) by the
 smoothing spline of factor ``P`` (:func:`calibration.preparation.smooth_reflection`,

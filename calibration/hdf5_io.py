@@ -564,9 +564,16 @@ def _read_channel_solution(f: Any, path: PathLike) -> ChannelSolution:
 def write_calibrated(
     path: PathLike, spectrum: CalibratedSpectrum, source: str, attrs: dict[str, Any] | None = None
 ) -> None:
-    """Write a calibrated spectrum: ``frequencies`` (Hz), ``mean`` and the stds (K)."""
+    """Write a calibrated spectrum: ``frequencies`` (Hz), ``mean`` and the stds (K).
+
+    With the VNA's systematic error attached, ``std_systematic`` and its Monte-Carlo
+    draws (``systematic_draws``, deviations from ``mean``) go beside them.
+    """
     with _atomic_h5(path, CALIBRATED_FORMAT) as f:
         f.attrs.update({**dict(attrs or {}), "source": source, "dof": float(spectrum.dof)})
         _dataset(f, "frequencies", spectrum.freq_hz, "Hz")
         for name in ("mean", "std", "std_calibration", "std_measurement"):
             _dataset(f, name, getattr(spectrum, name), "K")
+        if spectrum.systematic is not None:
+            _dataset(f, "std_systematic", spectrum.std_systematic, "K")
+            _dataset(f, "systematic_draws", spectrum.systematic, "K")

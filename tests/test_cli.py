@@ -59,7 +59,8 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
         np.testing.assert_allclose(std**2, cal**2 + meas**2, rtol=1e-12)
         mean = f["mean"][()]
     table = np.loadtxt(csv, delimiter=",", skiprows=1)
-    assert table.shape == (data.n_channels, 5)
+    assert table.shape == (data.n_channels, 6)
+    np.testing.assert_array_equal(table[:, 5], 0.0)  # no VNA systematic asked for
     np.testing.assert_allclose(table[:, 1], mean, rtol=1e-9)
     # The mock antenna is at the ambient 298 K; the calibration must recover it.
     assert abs(np.mean(mean) - 298.0) < 0.05
@@ -75,6 +76,29 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
     floor_mk = _number(r"noise floor RMS.*: ([\d.]+) mK", text)
     actual_mk = _number(r"actual calibration error RMS.*: ([\d.]+) mK", text)
     assert 0 < actual_mk < 4 * floor_mk
+
+
+def test_apply_with_the_vna_accuracy_adds_its_systematic_error(run_file, tmp_path, capsys):
+    """Table 2.3 read as 2 sigma, 24 draws: the spread over refits goes into the std, the
+    HDF5 (with its draws) and the CSV; too few draws are refused."""
+    sol, out, csv = tmp_path / "sol.h5", tmp_path / "ant.h5", tmp_path / "ant.csv"
+    assert main(["solve", str(run_file), "-o", str(sol), "--orders", "3,3,3,3,3"]) == 0
+    args = ["apply", str(sol), str(run_file), "-o", str(out), "--csv", str(csv)]
+    assert main([*args, "--vna-accuracy", "24", "--vna-correlation-mhz", "10"]) == 0
+    text = capsys.readouterr().out
+    assert "VNA accuracy (table 2.3, bound = 2 sigma), correlated over 10 MHz, 24 draws" in text
+    systematic_mk = _number(r"VNA systematic ([\d.]+) mK", text)
+    with h5py.File(out, "r") as f:
+        std, cal, meas, vna = (
+            f[k][()] for k in ("std", "std_calibration", "std_measurement", "std_systematic")
+        )
+        assert f["systematic_draws"].shape == (24, std.size)
+    np.testing.assert_allclose(std**2, cal**2 + meas**2 + vna**2, rtol=1e-12)
+    # 0.4-4 dB on every reflection moves a calibrated load by kelvins, not millikelvins
+    assert 100 < systematic_mk < 20_000
+    np.testing.assert_allclose(np.loadtxt(csv, delimiter=",", skiprows=1)[:, 5], vna)
+    assert main([*args, "--vna-accuracy", "1"]) == 2
+    assert "at least 2 draws" in capsys.readouterr().err
 
 
 def test_thesis_with_fixed_orders_and_subset(run_file, tmp_path, capsys):
