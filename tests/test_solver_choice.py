@@ -264,6 +264,17 @@ def test_a_bad_solver_in_a_schedule_is_refused_at_its_line():
     assert good.steps[-1].solver == "least-squares"
 
 
+def test_too_few_vna_accuracy_draws_are_refused_at_their_line():
+    text = BAD_STEP.replace("{solver: bayes}", "{vna_accuracy: 1}")
+    with pytest.raises(ScheduleError) as caught:
+        compile_text(text, "night.yaml", site=planning_site())
+    (problem,) = caught.value.problems
+    assert (problem.file, problem.line, problem.key) == ("night.yaml", 4, "calibrate.vna_accuracy")
+    assert "at least 2 draws" in problem.message
+    good = compile_text(text.replace(": 1}", ": 16}"), "n.yaml", site=planning_site())
+    assert good.steps[-1].vna_accuracy == 16
+
+
 def test_the_site_files_solver_is_read_written_back_and_refused_at_its_line(tmp_path):
     site = planning_site(solver="bayesian")
     assert parse_site(yaml.safe_load(site.to_yaml())).solver == "bayesian"
@@ -291,7 +302,7 @@ steps:
   - s11: {{targets: [ant, lna]}}
   - dicke: {{sources: '${{cal}}', seconds: 60}}
   - dicke: {{sources: [ant], seconds: 60}}
-  - calibrate: {{solver: bayesian, f_lo_hz: 60.0e+6, f_hi_hz: 75.0e+6}}
+  - calibrate: {{solver: bayesian, f_lo_hz: 60.0e+6, f_hi_hz: 75.0e+6, vna_accuracy: 8}}
   - observe: {{cycles: 1, seconds: 60}}
   - safe: {{}}
 """
@@ -311,6 +322,11 @@ def test_a_run_with_a_per_channel_solver_stores_uses_reports_and_shows_it(tmp_pa
     ratio = float(text.split("actual calibration error against the simulator's truth: ")[1]
                   .split(" = ")[1].split(" x floor")[0])
     assert 0.5 < ratio < 1.5, ratio
+    # The VNA's data-sheet error on the antenna, 8 refits: tens of kelvins for a per-channel
+    # solve from 8 calibrators (48 K seen), where the floor is tenths.
+    systematic = float(text.split("VNA systematic on 'ant': ")[1].split(" mK RMS")[0])
+    assert 1_000 < systematic < 200_000, systematic
+    assert "correlated over 5 MHz, 8 draws" in text
     (directory,) = [p for p in out.iterdir() if p.is_dir()]
     contents = read_run_file(directory / "run.h5")
     solution = contents.solution()

@@ -341,6 +341,11 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
         f"  on {outcome.validation.name!r}: noise floor {1e3 * floor:.3f} mK, predicted "
         f"calibration std {1e3 * predicted:.3f} mK, distance to floor {predicted / floor:.3f}"
     )
+    if outcome.systematics is not None and outcome.systematic_k is not None:
+        print(
+            f"  VNA systematic on {outcome.validation.name!r}: {1e3 * outcome.systematic_k:.3f} "
+            f"mK RMS ({outcome.systematics.describe()})"
+        )
     if sim is not None:
         actual = sim.physics.calibration_error_k(solution, outcome.data, outcome.validation)
         print(
