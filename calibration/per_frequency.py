@@ -351,6 +351,28 @@ def _gaussian_posterior(
     return mean, cov, np.asarray(log_z)
 
 
+def _positive_ns(theta: FloatArray) -> FloatArray:
+    """``theta`` as an operating point: a ``T_NS <= 0`` channel takes the others' median.
+
+    A channel learnt from itself alone can be noisy enough for its estimate of ``T_NS``
+    to cross zero (few calibrators, short integrations, spectra missing from a cycle);
+    linearising there is impossible (:func:`~calibration.radiometric_solver.linearise`),
+    yet the diode's ``T_NS`` is ~1000 K and smooth, so the band's median is a start from
+    which the Gauss-Newton step finds the channel's own posterior.
+    """
+    t_ns = theta[INDEX["NS"]]
+    bad = ~(t_ns > 0)
+    if not np.any(bad):
+        return theta
+    if np.all(bad):
+        raise IllPosedError(
+            "the calibrators give T_NS <= 0 K at every channel: no operating point"
+        )
+    out = theta.copy()
+    out[INDEX["NS"], bad] = np.median(t_ns[~bad])
+    return out
+
+
 def solve_bayesian_per_channel(
     data: CalibrationData,
     prior_mean: ArrayLike | None = None,
@@ -368,8 +390,9 @@ def solve_bayesian_per_channel(
         y_i = T_i - X_L T_NS0 (Q_i - Q0_i),   x_i = (X_unc, X_cos, X_sin, Q0_i X_L, X_L),
         w_i = 1 / ((X_L T_NS0)^2 var Q_i)
 
-    The start ``theta_0`` is :func:`solve_least_squares_per_channel`; ``iterations``
-    Gauss-Newton steps follow (T_NS converges after one or two). The posterior
+    The start ``theta_0`` is :func:`solve_least_squares_per_channel` (a channel whose
+    estimate of T_NS is not positive starts from the other channels' median);
+    ``iterations`` Gauss-Newton steps follow (T_NS converges after one or two). The posterior
     (eqs. 4.15, 4.16, 4.24) is Gaussian with::
 
         Sigma^-1 = X^T C^-1 X + P_0,       mu = Sigma (X^T C^-1 y + P_0 m_0)
@@ -406,7 +429,7 @@ def solve_bayesian_per_channel(
     terms = data.terms()
     temps, q, var_q = data.stacked()
     for _ in range(iterations):
-        problem = linearise(terms, temps, q, var_q, theta)
+        problem = linearise(terms, temps, q, var_q, _positive_ns(theta))
         mean, cov, log_z = _gaussian_posterior(problem, prior)
         theta = mean.T
     return ChannelSolution(data.freq_hz, theta, cov, log_z, "bayesian", tuple(data.names))

@@ -47,7 +47,10 @@ try:
 except PermissionError:
     print(json.dumps({"connect": "EACCES"}))
     sys.exit(0)
-client.sendall(b'{"v": 1, "op": "status"}\\n')
+try:
+    client.sendall(b'{"v": 1, "op": "status"}\\n')
+except BrokenPipeError:  # a refusing server may answer and close before reading
+    pass
 print(json.dumps({"connect": "ok", "reply": json.loads(client.makefile().readline())}))
 """
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import socket
 from collections.abc import Iterator
 from pathlib import Path
@@ -79,7 +80,10 @@ class DaemonClient:
         if self._socket is None:
             self.connect()
         assert self._socket is not None
-        self._socket.sendall(encode({"op": op, **fields}))
+        # A refusing daemon answers and closes before it reads the request (a uid not in
+        # the service's group): the send fails, and its reason is waiting to be read.
+        with contextlib.suppress(BrokenPipeError, ConnectionResetError):
+            self._socket.sendall(encode({"op": op, **fields}))
 
     def _receive(self) -> dict[str, Any]:
         assert self._lines is not None
