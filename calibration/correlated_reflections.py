@@ -1,43 +1,44 @@
-"""Reflection errors shared between rows, in the posterior's covariance.
+"""Reflection errors shared by neighbouring channels, in the posterior's covariance.
 
 The solver's rows carry the VNA's trace noise as a variance per row
 (:mod:`calibration.reflection_noise`): right for each row, for the fit's mean and for the
-noise scale ``s^2`` fitted from the rows' scatter. But two kinds of rows share one error:
-
-* **neighbouring channels**: the VNA measures at its sweep's points, which the hand-over
-  interpolates onto the spectrometer's channels (cubic splines,
-  :mod:`reach_receiver.store.handover`), so one point's error is shared by the
-  ``L = step / channel width`` channels around it (REACH: 100 kHz steps, 12.2 kHz
-  channels, ``L ~ 8``); a polynomial averages over channels, and an error shared by ``L``
-  channels averages ``L`` times less;
-* **every calibrator at one channel**: the receiver's reflection ``Gamma_rec`` is one
-  measurement, in every calibrator's row.
-
-Left alone, in simulations with trace noise of 4e-4 (7-20 % of each row's variance, as
-in a REACH-like run) the calibration error was 1.6x its posterior's with ``L = 8``, and
-1.3x with ``L = 1`` where the trace noise dominated the rows.
+noise scale ``s^2`` fitted from the rows' scatter. But the VNA measures at its sweep's
+points, which the hand-over interpolates onto the spectrometer's channels (cubic splines,
+:mod:`reach_receiver.store.handover`), so one point's error is shared by the
+``L = step / channel width`` channels around it (REACH: 100 kHz steps, 12.2 kHz channels,
+``L ~ 8``); a polynomial averages over channels, and an error shared by ``L`` channels
+averages ``L`` times less. With trace noise of 4e-4 on the calibrators' reflections alone
+(the receiver's exact), shared over 8 channels, the solution's error was 2.0x its
+posterior's; with this correction 1.0 (``tests/test_correlated_reflections.py``).
 
 The estimate keeps its weights ``W = diag(w)``, ``w = 1 / v`` the rows' variances; its
 covariance is the sandwich ``A^-1 X^T W C W X A^-1`` (``A = X^T W X + P``) with ``C`` the
 rows' true covariance. For a model smooth over ``L`` channels only each row's sum of
 covariances with its neighbours matters: ``L`` times its own for errors shared over ``L``
 channels (a spline through white points has the same sum as blocks of ``L``). With
-``J_i = dT_i / d(Re, Im) Gamma_rec`` and ``sigma_rec`` the receiver's trace noise, rows
-``x_i``::
+``v_src`` each source's own reflection variance in its rows::
 
-    X^T W C W X = A - H_diag + L (H_src + G_rec)
-    H_diag = X^T diag(w^2 v_r) X                      (the reflection part v_r as the rows hold it)
-    H_src  = X^T diag(w^2 v_src) X                    (each source's own reflection error)
-    G_rec  = sum_f (sigma_rec^2 / 2) sum_{re,im} u_f u_f^T,   u_f = sum_i w_if x_if J_if
+    X^T W C W X = A + (L - 1) H_src,      H_src = X^T diag(w^2 v_src) X
+
+(with the calibrators' temperature offsets marginalised, ``W`` is the fit's ``C^-1``
+with their projection, in ``A`` and ``H_src`` alike: leaving it out of ``H_src`` overstated
+the widening sixfold on a run with thermocouple errors)
 
 and, with the posterior's ``Cov_0 = s^2 A^-1``::
 
-    Cov = Cov_0 + Cov_0 (L (H_src + G_rec) - H_diag) Cov_0 / s^2
+    Cov = Cov_0 + (L - 1) Cov_0 H_src Cov_0 / s^2
 
 :func:`widen` applies it to a posterior, component by component for a model average.
-Approximations, stated: ``H`` and ``G`` leave out the marginalised calibrator temperature
-offsets (:mod:`calibration.normal_equations`), small beside the reflections'; the mean,
-the evidence and ``s^2`` are unchanged.
+
+Not here: the receiver's reflection. Its error is one reading in every calibrator's row
+and in every source calibrated with the solution, and in a calibrated source the two
+largely cancel (the noise waves absorb a wrong ``Gamma_rec`` the way the source's
+calibration reapplies it). The rows keep its variance each, and a calibrated source its
+own share (:meth:`calibration.solution.Solution.calibrate`): a calibrated antenna's
+predictive then matches its error (0.93-0.94 actual / predicted in the test's ensembles),
+but the noise-wave parameters' own error bars leave out its sharing between calibrators
+and channels (up to 1.7x too small where the receiver's trace noise is shared over 8
+channels). The mean, the evidence and ``s^2`` are unchanged.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from numpy.typing import NDArray
 
 from .averaging import MixturePosterior, mixture_of
 from .conjugate import LinearPosterior
-from .normal_equations import weighted_gram
+from .normal_equations import sandwich_gram
 from .polynomial_model import Orders, full_indices
 
 __all__ = ["shared_error_excess", "widen"]
@@ -63,29 +64,20 @@ def shared_error_excess(
     basis: FloatArray,
     layout: Orders,
     correlation_channels: float,
-    source_variance: FloatArray | None,
-    receiver_slopes: tuple[FloatArray, FloatArray] | None,
-    receiver_std: FloatArray | None,
+    source_variance: FloatArray,
+    offset_variance: FloatArray | None = None,
 ) -> FloatArray:
-    """``L (H_src + G_rec) - H_diag`` of the module docstring, in the ``layout``.
+    """``(L - 1) H_src`` of the module docstring, in the ``layout``.
 
-    ``features (M, N, 5)`` and ``weights (M, N)`` are the rows as the fit weighed them;
-    ``source_variance (M, N)`` the sources' own reflection variance in K^2,
-    ``receiver_slopes`` ``(J_re, J_im)``, each ``(M, N)``, with ``receiver_std (N,)``.
+    ``features (M, N, 5)`` and ``weights (M, N)`` are the rows as the fit weighed them,
+    ``source_variance (M, N)`` the sources' own reflection variance in K^2, and
+    ``offset_variance`` the calibrators' marginalised temperature offsets, whose
+    projection the fit's ``C^-1`` holds (:func:`calibration.normal_equations.sandwich_gram`).
     """
-    big_l = float(correlation_channels)
-    w2 = weights**2
-    excess = np.zeros((sum(layout), sum(layout)))
-    if source_variance is not None:
-        excess += (big_l - 1.0) * weighted_gram(features, w2 * source_variance, basis, layout)
-    if receiver_slopes is not None and receiver_std is not None:
-        sigma = np.asarray(receiver_std, dtype=float)
-        half_var = np.broadcast_to(sigma**2 / 2.0, weights.shape[1:])
-        for slope in receiver_slopes:
-            u = np.einsum("mn,mnk,mn->nk", weights, features, slope)[None]  # (1, N, 5)
-            excess += big_l * weighted_gram(u, half_var[None], basis, layout)
-            excess -= weighted_gram(features, w2 * slope**2 * half_var, basis, layout)
-    return excess
+    excess = float(correlation_channels) - 1.0
+    return excess * sandwich_gram(
+        features, weights, source_variance, basis, layout, offset_variance
+    )
 
 
 def _widened(

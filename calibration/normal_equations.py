@@ -67,11 +67,38 @@ def _project_pairs(
     return gram
 
 
-def weighted_gram(
-    features: FloatArray, weights: FloatArray, basis: FloatArray, max_orders: Sequence[int]
+def sandwich_gram(
+    features: FloatArray,
+    weights: FloatArray,
+    variance: FloatArray,
+    basis: FloatArray,
+    max_orders: Sequence[int],
+    offset_variance: FloatArray | None = None,
 ) -> FloatArray:
-    """``sum_if w_if x_if x_if^T`` in the ``max_orders`` layout, for any row weights."""
-    return _project_pairs(features, weights, basis, as_orders(max_orders))
+    """``X^T C^-1 D C^-1 X`` for row variances ``D = diag(variance)``, in the layout.
+
+    ``C^-1`` is the fit's: ``diag(weights)``, less, for each source ``m`` whose
+    temperature offset is marginalised (``offset_variance``, as in
+    :func:`build_normal_equations`), the Woodbury term ``k_m W_m 1 1^T W_m`` with
+    ``k_m = var_m / (1 + var_m sum W_m)``. Per source, with ``u = X_m^T W_m 1``,
+    ``s = X_m^T W_m^2 D_m 1`` and ``a = 1^T W_m^2 D_m 1``::
+
+        X_m^T W_m^2 D_m X_m - k (s u^T + u s^T) + k^2 a u u^T
+    """
+    orders = as_orders(max_orders)
+    wwd = weights**2 * variance
+    out = _project_pairs(features, wwd, basis, orders)
+    if offset_variance is None:
+        return out
+    for m, var in enumerate(np.asarray(offset_variance, dtype=float)):
+        if var <= 0:
+            continue
+        k = var / (1.0 + var * float(np.sum(weights[m])))
+        u = _project_vector(features[m : m + 1], weights[m : m + 1], basis, orders)
+        s = _project_vector(features[m : m + 1], wwd[m : m + 1], basis, orders)
+        a = float(np.sum(wwd[m]))
+        out = out - k * (np.outer(s, u) + np.outer(u, s)) + k * k * a * np.outer(u, u)
+    return out
 
 
 def _project_vector(

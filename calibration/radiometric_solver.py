@@ -61,7 +61,7 @@ from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
-from .reflection_noise import receiver_slopes, reflection_variance, temperature_variance
+from .reflection_noise import reflection_variance, temperature_variance
 from .shrinkage import ShrinkagePrior
 from .solution import Solution
 
@@ -130,24 +130,17 @@ class _LastRows:
 
 
 def _shared_errors(
-    data: CalibrationData, last: _LastRows, gammas: NDArray[np.complex128], q: FloatArray
+    data: CalibrationData, last: _LastRows, gammas: NDArray[np.complex128], q: FloatArray,
+    gamma_std: FloatArray,
 ) -> FloatArray:
-    """The posterior's share of reflection errors shared between rows (correlated_reflections)."""
+    """The posterior's share of the sources' reflection errors shared between channels."""
     assert last.problem is not None
     theta = last.theta[:, None, :]
-    gamma_std = data.reflection_errors()
-    source = (
-        None if gamma_std is None
-        else temperature_variance(theta, gammas, data.gamma_rec, q, gamma_std[:, :])
-    )
-    slopes = (
-        None if data.gamma_rec_std is None
-        else receiver_slopes(theta, gammas, data.gamma_rec, q)
-    )
+    source = temperature_variance(theta, gammas, data.gamma_rec, q, gamma_std)
+    offsets = data.temperature_variances()
     return shared_error_excess(
         last.problem.features, last.problem.weights, last.basis, last.largest,
-        data.reflection_correlation_channels, source, slopes,
-        None if data.gamma_rec_std is None else np.asarray(data.gamma_rec_std),
+        data.reflection_correlation_channels, source, offsets if np.any(offsets > 0) else None,
     )
 
 
@@ -259,8 +252,10 @@ def solve_radiometric(
     )
     posterior, table = result.posterior, result.table
     metadata: dict[str, object] = dict(result.limits_metadata())
-    if last.problem is not None and (gamma_std is not None or data.gamma_rec_std is not None):
-        posterior = widen(posterior, _shared_errors(data, last, gammas, q), last.largest)
+    shared = data.reflection_correlation_channels
+    if last.problem is not None and gamma_std is not None and shared > 1:
+        excess = _shared_errors(data, last, gammas, q, gamma_std)
+        posterior = widen(posterior, excess, last.largest)
         metadata["reflection_correlation_channels"] = data.reflection_correlation_channels
     best = max(table, key=table.__getitem__)
     metadata["best_orders"] = list(best)
