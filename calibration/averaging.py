@@ -29,7 +29,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from .conjugate import LinearPosterior, ScalePrior, solve
+from .conjugate import LinearPosterior, ScalePrior, solve_many
 from .normal_equations import NormalEquations
 from .polynomial_model import Orders, full_indices
 
@@ -149,12 +149,18 @@ def mixture_posterior(
     log_evidence: float,
 ) -> MixturePosterior:
     """The mixture of the components' conjugate posteriors (module docstring)."""
-    posteriors, weights = [], []
-    for orders, g, weight in components:
-        variances = prior.variances(orders)[g]
-        posteriors.append(solve(normal, orders, np.zeros(variances.size), variances, scale_prior))
-        weights.append(weight)
-    return mixture_of(posteriors, np.asarray(weights), log_evidence, normal.n_rows)
+    by_model: dict[Orders, list[int]] = {}
+    for i, (orders, _, _) in enumerate(components):
+        by_model.setdefault(orders, []).append(i)
+    posteriors: list[LinearPosterior | None] = [None] * len(components)
+    for orders, members in by_model.items():  # one stacked solve per model
+        variances = prior.variances(orders)[[components[i][1] for i in members]]
+        solved = solve_many(normal, orders, np.zeros_like(variances), variances, scale_prior)
+        for i, post in zip(members, solved, strict=True):
+            posteriors[i] = post
+    weights = np.array([w for _, _, w in components])
+    solved_all = [p for p in posteriors if p is not None]
+    return mixture_of(solved_all, weights, log_evidence, normal.n_rows)
 
 
 def mixture_of(

@@ -30,8 +30,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.linalg import LinAlgError
 from numpy.typing import NDArray
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.special import gammaln
 
 from .errors import IllPosedError
@@ -134,44 +134,64 @@ def solve(
     ``prior_mean``/``prior_var`` are the ``V_0``-scale prior of that model's coefficients;
     ``scale_prior=None`` means the noise variance is known (``s^2 = 1``).
     """
+    return solve_many(normal, orders, prior_mean[None], prior_var[None], scale_prior)[0]
+
+
+def solve_many(
+    normal: NormalEquations,
+    orders: Sequence[int],
+    prior_means: FloatArray,
+    prior_vars: FloatArray,
+    scale_prior: ScalePrior | None,
+) -> list[LinearPosterior]:
+    """:func:`solve` for one model under ``B`` priors (``(B, P)`` means and variances) at once.
+
+    Each posterior: precision ``Lambda = G + V_0^-1``, mean ``Lambda^-1 (X^T W y + V_0^-1
+    m_0)``, and the evidence of eq. 3.35 (``Q_min`` and ``log|Lambda|``). The precisions are
+    Jacobi-scaled before their (stacked) Cholesky factorisation. A prior the data and it
+    together leave singular raises :class:`IllPosedError`.
+    """
     orders = as_orders(orders)
     idx = normal.indices(orders)
-    precision = normal.gram[np.ix_(idx, idx)] + np.diag(1.0 / prior_var)
-    jacobi = np.sqrt(np.diag(precision))
+    inv_var = 1.0 / prior_vars
+    precision = normal.gram[np.ix_(idx, idx)][None] + inv_var[:, :, None] * np.eye(idx.size)
+    jacobi = np.sqrt(np.diagonal(precision, axis1=1, axis2=2))
+    scaled = precision / (jacobi[:, :, None] * jacobi[:, None, :])
     try:
-        factor = cho_factor(precision / np.outer(jacobi, jacobi), lower=True)
+        chol = np.linalg.cholesky(scaled)
     except LinAlgError as err:
         raise IllPosedError(
             f"the data do not constrain a model with orders {orders}: "
             "add calibrators or lower the orders"
         ) from err
-    rhs = normal.rhs(idx) + prior_mean / prior_var
-    mean = cho_solve(factor, rhs / jacobi) / jacobi
-    inverse = cho_solve(factor, np.diag(1.0 / jacobi)) / jacobi[:, None]
-    inverse = 0.5 * (inverse + inverse.T)
-    chi2 = normal.chi2(mean, idx)
-    q_min = chi2 + float(np.sum((mean - prior_mean) ** 2 / prior_var))
-    log_det_precision = 2.0 * float(np.sum(np.log(np.diag(factor[0])))) + 2.0 * float(
-        np.sum(np.log(jacobi))
+    rhs = normal.rhs(idx)[None] + prior_means * inv_var
+    inverse = np.linalg.inv(scaled) / (jacobi[:, :, None] * jacobi[:, None, :])
+    inverse = 0.5 * (inverse + np.swapaxes(inverse, 1, 2))
+    means = np.einsum("bij,bj->bi", inverse, rhs)
+    offsets = np.broadcast_to(normal.reference, (len(means), normal.reference.size)).copy()
+    offsets[:, idx] -= means
+    chi2 = normal.chi2_ref + 2.0 * offsets @ normal.cross + np.sum(
+        (offsets @ normal.gram) * offsets, axis=1
+    )
+    q_min = chi2 + np.sum((means - prior_means) ** 2 * inv_var, axis=1)
+    log_det_precision = 2.0 * np.sum(
+        np.log(np.diagonal(chol, axis1=1, axis2=2)) + np.log(jacobi), axis=1
     )
     base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
-    occam = -0.5 * log_det_precision - 0.5 * float(np.sum(np.log(prior_var)))
+    log_z = base - 0.5 * log_det_precision - 0.5 * np.sum(np.log(prior_vars), axis=1)
     if scale_prior is None:
-        return LinearPosterior(
-            orders, mean, inverse, np.inf, base - 0.5 * q_min + occam, 1.0, chi2, normal.n_rows
-        )
+        return [
+            LinearPosterior(orders, m, c, np.inf, float(z - 0.5 * q), 1.0, float(x), normal.n_rows)
+            for m, c, z, q, x in zip(means, inverse, log_z, q_min, chi2, strict=True)
+        ]
     a, b = scale_prior.a, scale_prior.b
     a_star = a + 0.5 * normal.n_rows
     b_star = b + 0.5 * q_min
-    log_z = base + a * np.log(b) - a_star * np.log(b_star) + gammaln(a_star) - gammaln(a) + occam
-    noise_variance = b_star / a_star
-    return LinearPosterior(
-        orders,
-        mean,
-        noise_variance * inverse,
-        2.0 * a_star,
-        float(log_z),
-        noise_variance,
-        chi2,
-        normal.n_rows,
-    )
+    log_z = log_z + a * np.log(b) - a_star * np.log(b_star) + gammaln(a_star) - gammaln(a)
+    return [
+        LinearPosterior(
+            orders, m, (bs / a_star) * c, 2.0 * a_star, float(z), float(bs / a_star), float(x),
+            normal.n_rows,
+        )
+        for m, c, z, bs, x in zip(means, inverse, log_z, b_star, chi2, strict=True)
+    ]

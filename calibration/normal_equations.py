@@ -50,20 +50,32 @@ FloatArray = NDArray[np.float64]
 def _project_pairs(
     features: FloatArray, weights: FloatArray, basis: FloatArray, max_orders: Orders
 ) -> FloatArray:
-    """``G = sum_if w x x^T`` assembled block by block from per-channel feature moments."""
+    """``G = sum_if w x x^T`` from per-channel feature moments, every block in one product.
+
+    With ``x = f_k(i, f) B_j(f)``, block ``(a, b)`` is ``sum_f c_ab(f) B_i(f) B_j(f)`` with
+    ``c_ab(f) = sum_i w_if f_a f_b``: the moments ``(pairs, N)`` times the basis products
+    ``(N, n^2)``, one matrix product for every block.
+    """
     slices = coefficient_slices(max_orders)
-    p = sum(max_orders)
-    gram = np.zeros((p, p))
-    wf = weights[..., None] * features  # (M, N, 5)
-    for a in range(N_PARAMETERS):
-        for b in range(a, N_PARAMETERS):
-            na, nb = max_orders[a], max_orders[b]
-            if na == 0 or nb == 0:
-                continue
-            c = np.einsum("mn,mn->n", wf[..., a], features[..., b])
-            block = basis[:, :na].T @ (c[:, None] * basis[:, :nb])
-            gram[slices[a], slices[b]] = block
-            gram[slices[b], slices[a]] = block.T
+    gram = np.zeros((sum(max_orders), sum(max_orders)))
+    n = max(max_orders)
+    pairs = [
+        (a, b)
+        for a in range(N_PARAMETERS)
+        for b in range(a, N_PARAMETERS)
+        if max_orders[a] and max_orders[b]
+    ]
+    if not pairs:
+        return gram
+    columns = [np.ascontiguousarray(features[..., k]) for k in range(N_PARAMETERS)]
+    weighted = [weights * column for column in columns]  # (M, N) each
+    moments = np.stack([np.einsum("mn,mn->n", weighted[a], columns[b]) for a, b in pairs])
+    rows = np.ascontiguousarray(basis[:, :n].T)  # (n, N)
+    blocks = [(rows * m) @ rows.T for m in moments]
+    for (a, b), block in zip(pairs, blocks, strict=True):
+        block = block[: max_orders[a], : max_orders[b]]
+        gram[slices[a], slices[b]] = block
+        gram[slices[b], slices[a]] = block.T
     return gram
 
 

@@ -23,6 +23,8 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from .noise_waves import N_PARAMETERS
 from .polynomial_model import Orders, as_orders
 
@@ -60,17 +62,23 @@ def _paired_moves(orders: Orders, lo: Sequence[int], hi: Sequence[int]) -> Itera
                         yield tuple(moved)  # type: ignore[misc]
 
 
+#: Scores many models in one call: one log evidence per model, in order.
+ManyEvidences = Callable[[Sequence[Orders]], Sequence[float]]
+
+
 def _climb(
     log_evidence: Callable[[Orders], float],
     lo: Orders,
     hi: Orders,
     starts: Sequence[Orders],
     moves: Sequence[Callable[[Orders], Iterable[Orders]]],
+    many: ManyEvidences | None = None,
 ) -> OrderSearchResult:
     """Steepest ascent from each start: the best of the first kind of move that improves.
 
     ``moves`` are tried in turn at each step (cheap ones first); the climb ends where none
-    improves. Every model evaluated is in the table, each scored by ``log_evidence``.
+    improves. Every model evaluated is in the table, each scored by ``log_evidence``, or
+    a step's new candidates all at once by ``many`` (the same values, batched).
     """
     if any(a > b for a, b in zip(lo, hi, strict=True)):
         raise ValueError(f"min_orders {lo} exceed max_orders {hi}")
@@ -81,6 +89,13 @@ def _climb(
             table[orders] = log_evidence(orders)
         return table[orders]
 
+    def candidates(found: Iterable[Orders]) -> list[Orders]:
+        found = list(found)
+        fresh = [o for o in dict.fromkeys(found) if o not in table]
+        if many is not None and len(fresh) > 1:
+            table.update(zip(fresh, (float(v) for v in np.asarray(many(fresh))), strict=True))
+        return found
+
     for start in starts:
         current: Orders = tuple(  # type: ignore[assignment]
             min(max(n, a), b) for n, a, b in zip(start, lo, hi, strict=True)
@@ -88,7 +103,7 @@ def _climb(
         current_score = score(current)
         while True:
             for move in moves:
-                best = max(move(current), key=score, default=None)
+                best = max(candidates(move(current)), key=score, default=None)
                 if best is not None and score(best) > current_score:
                     break
             else:
@@ -104,17 +119,20 @@ def search_orders_jointly(
     max_orders: Sequence[int],
     starts: Iterable[Sequence[int]] = (),
     lookahead: int = 2,
+    many: ManyEvidences | None = None,
 ) -> OrderSearchResult:
     """Maximise ``log_evidence`` by steepest ascent over single and paired moves.
 
     One climb from each of ``starts`` (the smallest model when none is given): the best
     single-parameter move of up to ``lookahead`` terms while one improves, else the best
-    move of two parameters by one term each; it ends where neither improves.
+    move of two parameters by one term each; it ends where neither improves. ``many``,
+    if given, scores each step's new candidates in one call (:func:`_climb`).
     """
     lo, hi = as_orders(min_orders), as_orders(max_orders)
     return _climb(
         log_evidence, lo, hi, [as_orders(s) for s in starts] or [lo],
         [lambda o: _neighbours(o, lookahead, lo, hi), lambda o: _paired_moves(o, lo, hi)],
+        many,
     )
 
 
