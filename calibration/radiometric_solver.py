@@ -211,11 +211,14 @@ def solve_radiometric(
 
     def build(largest: Orders) -> NormalEquations:
         b = basis.matrix(data.freq_hz, max(largest))
-        # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
-        start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
-        normal = _normal_equations(start, b, largest, ridge(largest))
-        for _ in range(iterations):
-            theta = operating_point(normal, b, largest)
+        # Limits raised (fit_extending): the last operating point is the better start.
+        warm = last.problem is not None and iterations > 0
+        if not warm:
+            # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
+            start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
+            normal = _normal_equations(start, b, largest, ridge(largest))
+        for step in range(iterations):
+            theta = last.theta if warm and step == 0 else operating_point(normal, b, largest)
             extra = reflection_variance(
                 theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
             )
