@@ -4,13 +4,15 @@ Timed on one simulated run of the default configuration (12 calibrators x 6554 c
 
 * ours: ``solve_radiometric(run.data)`` (order selection by evidence, posterior) followed
   by ``solution.calibrate(...)`` of the validation source (predictive mean and
-  uncertainties). Target: <= 1 s (median).
+  uncertainties). Target: <= 0.1 s (median), with model averaging, measured side by side
+  with edges-cal.
 * the thesis solver, the same way (``solve_thesis``).
 * edges-cal's iterative method on its four loads (``solve_edges``, see
   :mod:`benchmarks.edges_cal_baseline`), followed by its calibration of the validation
   source; and, for a like-for-like comparison, ours on the same four loads.
 
-Each is run once to warm up, then ``repeats`` times; the median is reported. Times on a
+Each is timed on :data:`RUNS` simulated runs, once to warm up and then ``repeats``
+times on each; the median of all is reported. Times on a
 shared machine are noisy: they are printed, never asserted.
 
 The timings run in fresh subprocesses, twice: with the BLAS threading as installed
@@ -39,9 +41,11 @@ from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
 from calibration.simulate import SimulatedRun, SimulationConfig, simulate_run
 from calibration.thesis_solver import solve_thesis
 
-#: Target of the issue for our full solve + calibrate (s).
-TARGET_SECONDS = 1.0
-REPEATS = 5
+#: Target for our full solve + calibrate with model averaging, 12 cal x 6554 channels (s).
+TARGET_SECONDS = 0.1
+REPEATS = 3
+#: Simulated runs (seeds ``seed`` to ``seed + RUNS - 1``) each workload is timed on.
+RUNS = 5
 
 OURS = "ours: solve_radiometric + calibrate (12 cal)"
 OURS_BEST = "ours, single best model (average=False)"
@@ -128,10 +132,16 @@ class SpeedResult:
 
 
 def run_speed_here(repeats: int = REPEATS, seed: int = 0) -> SpeedResult:
-    """Time every workload on one simulated default run, in this process."""
-    config = SimulationConfig()
-    run = simulate_run(config, rng=seed)
-    times = {name: time_call(fn, repeats) for name, fn in workloads(run).items()}
+    """Time every workload on :data:`RUNS` simulated default runs, in this process.
+
+    Several runs, because the time depends on the data: a run whose evidence wants more
+    terms than the first order limits (seed 0: T_sin at 8 terms) is solved twice over.
+    """
+    times: dict[str, list[float]] = {}
+    for k in range(RUNS):
+        run = simulate_run(SimulationConfig(), rng=seed + k)
+        for name, fn in workloads(run).items():
+            times.setdefault(name, []).extend(time_call(fn, repeats))
     return SpeedResult(times, run.data.n_channels, len(run.data.names))
 
 
@@ -160,8 +170,9 @@ def run_speed(single_thread: bool, repeats: int = REPEATS, seed: int = 0) -> Spe
 def report(result: SpeedResult) -> None:
     """Print the times and the ratio."""
     print(
-        f"-- {result.label}: median of {len(next(iter(result.times.values())))} "
-        f"repetitions after a warm-up; load average now {os.getloadavg()[0]:.2f}"
+        f"-- {result.label}: median of {len(next(iter(result.times.values())))} timings "
+        f"({RUNS} runs x {REPEATS}, each after a warm-up); load average now "
+        f"{os.getloadavg()[0]:.2f}"
     )
     for name, times in result.times.items():
         print(
@@ -169,7 +180,7 @@ def report(result: SpeedResult) -> None:
             f"(min {1e3 * min(times):7.1f}, max {1e3 * max(times):7.1f})"
         )
     verdict = "PASS" if result.passed else "FAIL"
-    print(f"  ours: {result.median(OURS):.3f} s, target <= {TARGET_SECONDS:.0f} s: {verdict}")
+    print(f"  ours: {result.median(OURS):.3f} s, target <= {TARGET_SECONDS:.1f} s: {verdict}")
     print(
         f"  ratio ours (12 cal) / edges-cal (4 loads) = {result.ratio_to_edges:.2f}; "
         f"ours (4 loads) / edges-cal (4 loads) = "
