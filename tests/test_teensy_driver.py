@@ -100,6 +100,16 @@ def test_a_damaged_reply_is_retried_after_resync(link, fault):
         assert teensy.rail("24v") is True
 
 
+def test_a_late_answer_to_the_resync_line_is_dropped_not_taken_for_garbage(link):
+    """The board answers resync's lone LF with an untagged ``ERR 06``; under load that
+    answer can come after the driver stopped waiting for quiet, ahead of the pong."""
+    with Teensy(link.port, timeout_s=0.5) as teensy:
+        link.inject(LinkFault.DELAY)
+        teensy.resync()
+        teensy.set_rail("24v", True)
+        assert teensy.rail("24v") is True
+
+
 def test_persistent_damage_is_reported_not_guessed(link):
     with Teensy(link.port, timeout_s=0.2, retries=1) as teensy:
         link.inject(LinkFault.GARBLE, count=10)

@@ -54,6 +54,9 @@ DEADMAN_MIN_MS = 100
 DEADMAN_MAX_MS = 3_600_000
 
 _REPLY = re.compile(r"^(OK|ERR) (\d\d) #([A-Za-z0-9]{1,8})(?: (.*))?$")
+#: A reply without a tag: the board's answer to a line that had none, such as the lone LF
+#: of :meth:`Teensy.resync` (``ERR 06 empty line``) or the rest of a garbled line.
+_UNTAGGED = re.compile(r"^(OK|ERR) (\d\d)(?: (?!#)(.*))?$")
 
 
 class TeensyError(DeviceError):
@@ -181,6 +184,13 @@ class Teensy:
             raw = self.transport.read_until(b"\n", timeout_s=timeout_s)
             line = raw.decode("ascii", errors="replace").rstrip("\r\n")
             match = _REPLY.match(line)
+            if match is None and _UNTAGGED.match(line):
+                # Late under load, after resync's wait for quiet: not this request's.
+                report = _trip_report(line, command)
+                if report is not None:
+                    raise report
+                log.info("teensy: dropping untagged reply %r", line)
+                continue
             if match is None:
                 raise ProtocolError(DEVICE, f"garbled reply {line!r}", command)
             kind, code, reply_tag, text = match.groups()

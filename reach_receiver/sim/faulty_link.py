@@ -13,6 +13,7 @@ from __future__ import annotations
 import enum
 import logging
 import threading
+import time
 
 import serial
 
@@ -27,6 +28,11 @@ class LinkFault(enum.Enum):
     GARBLE = "garble"  # bytes flipped: the reply no longer parses
     TRUNCATE = "truncate"  # the reply stops half-way, no line end
     DROP = "drop"  # no reply at all
+    DELAY = "delay"  # the reply arrives DELAY_S late, intact (a busy host or board)
+
+
+#: How late a delayed reply arrives (s): past a resync's wait for quiet, within a timeout.
+DELAY_S = 0.1
 
 
 class FaultyLink:
@@ -95,6 +101,9 @@ class FaultyLink:
         log.info("faulty link: %s on %r", fault.value, reply)
         if fault is LinkFault.DROP:
             return b""
+        if fault is LinkFault.DELAY:
+            time.sleep(DELAY_S)
+            return reply
         if fault is LinkFault.TRUNCATE:
             return reply[: len(reply) // 2]
         flipped = bytes(b ^ 0x20 if 0x41 <= b <= 0x7A else b for b in reply[:-2])
