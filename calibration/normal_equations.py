@@ -50,11 +50,11 @@ FloatArray = NDArray[np.float64]
 def _project_pairs(
     features: FloatArray, weights: FloatArray, basis: FloatArray, max_orders: Orders
 ) -> FloatArray:
-    """``G = sum_if w x x^T`` from per-channel feature moments, every block in one product.
+    """``G = sum_if w x x^T`` assembled block by block from per-channel feature moments.
 
-    With ``x = f_k(i, f) B_j(f)``, block ``(a, b)`` is ``sum_f c_ab(f) B_i(f) B_j(f)`` with
-    ``c_ab(f) = sum_i w_if f_a f_b``: the moments ``(pairs, N)`` times the basis products
-    ``(N, n^2)``, one matrix product for every block.
+    With ``x = f_k(i, f) B_j(f)``, block ``(a, b)`` is ``B^T diag(c_ab) B`` with the moments
+    ``c_ab(f) = sum_i w_if f_a f_b``, computed from contiguous copies of the features
+    (the strided ones cost more than the copy) and one weighted column at a time.
     """
     slices = coefficient_slices(max_orders)
     gram = np.zeros((sum(max_orders), sum(max_orders)))
@@ -68,8 +68,12 @@ def _project_pairs(
     if not pairs:
         return gram
     columns = [np.ascontiguousarray(features[..., k]) for k in range(N_PARAMETERS)]
-    weighted = [weights * column for column in columns]  # (M, N) each
-    moments = np.stack([np.einsum("mn,mn->n", weighted[a], columns[b]) for a, b in pairs])
+    moments = np.empty((len(pairs), basis.shape[0]))
+    weighted, current = columns[0], -1
+    for row, (a, b) in enumerate(pairs):
+        if a != current:  # pairs come grouped by a: one weighted column at a time
+            weighted, current = weights * columns[a], a
+        moments[row] = np.einsum("mn,mn->n", weighted, columns[b])
     rows = np.ascontiguousarray(basis[:, :n].T)  # (n, N)
     blocks = [(rows * m) @ rows.T for m in moments]
     for (a, b), block in zip(pairs, blocks, strict=True):
