@@ -316,15 +316,15 @@ def test_a_run_with_a_per_channel_solver_stores_uses_reports_and_shows_it(tmp_pa
     text = capsys.readouterr().out
     assert "solution: bayesian, per channel (" in text
     assert "log evidence (sum over channels, eq. 4.22)" in text
-    # The antenna's actual error against the simulator's truth, in units of the per-channel
-    # floor: 1229 independent channels, so their RMS is the floor's to ~5 % (0.94-1.07 seen
-    # over four seeds on an idle machine). Under load the iTPM simulator skips spectra (630
-    # of 1410 once in CI) and the floor stated from the data then departs from their
-    # actual noise: 0.68 and 0.47 seen, a fault of the simulator under load, not of the
-    # solver; the bound keeps to what tells a working per-channel solve from a broken one.
-    ratio = float(text.split("actual calibration error against the simulator's truth: ")[1]
-                  .split(" = ")[1].split(" x floor")[0])
-    assert 0.3 < ratio < 1.5, ratio
+    # The antenna's actual error against the simulator's truth, each channel in units of
+    # its own floor: 1229 independent channels, so their RMS is 1 to ~2 % (0.97-1.015 seen
+    # over seven runs). The ratio of the two RMS values on the line above it is not held:
+    # at 62.2 MHz the eight calibrators' reflections line up, that channel's floor is
+    # hundreds of times the median, and that one channel made the ratio anything from 0.16
+    # to 0.93 between runs (the iTPM simulator's skips under load change the noise drawn).
+    assert "actual calibration error against the simulator's truth: " in text
+    normalised = float(text.split("per channel: RMS of error / floor ")[1].split(" (")[0])
+    assert 0.9 < normalised < 1.1, normalised
     # The VNA's data-sheet error on the antenna, 8 refits: tens of kelvins for a per-channel
     # solve from 8 calibrators (48 K seen), where the floor is tenths.
     systematic = float(text.split("VNA systematic on 'ant': ")[1].split(" mK RMS")[0])

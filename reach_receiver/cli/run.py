@@ -31,9 +31,11 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import FrameType
 
+import numpy as np
+
 from calibration.identifiability import prior_dominated_line
 from calibration.per_frequency import ChannelSolution
-from calibration.solvers import AnySolution, method_name
+from calibration.solvers import AnySolution, method_name, solution_noise_floor
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig, find_site, load_site
 from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
@@ -41,6 +43,7 @@ from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
 from reach_receiver.errors import ReceiverError
 from reach_receiver.run.context import NoProgress, Progress
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
+from reach_receiver.run.steps.calibrate import CalibrationOutcome
 from reach_receiver.schedule.compile import ScheduleError
 from reach_receiver.schedule.timing import format_timeline, hms
 from reach_receiver.sim.effects import SimEffects
@@ -352,3 +355,25 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
             f"  actual calibration error against the simulator's truth: "
             f"{1e3 * actual:.3f} mK = {actual / floor:.3f} x floor"
         )
+        if isinstance(solution, ChannelSolution):
+            _print_per_channel_errors(solution, outcome, sim)
+
+
+def _print_per_channel_errors(
+    solution: ChannelSolution, outcome: CalibrationOutcome, sim: SimulatedReceiver
+) -> None:
+    """Each channel's error in units of its own floor, for a per-channel solution.
+
+    Where the calibrators' reflections line up (all real at one frequency, so T_cos and
+    T_sin cannot be told apart there), a channel's floor is hundreds of times the band's
+    median, and that one channel decides both RMS values of the line above. The RMS of
+    error / floor over the channels weighs each channel once.
+    """
+    data, source = outcome.data, outcome.validation
+    errors = sim.physics.calibration_errors_k(solution, data, source)
+    floor = solution_noise_floor(solution, data, source).std
+    worst = int(np.sum(floor > 10 * np.median(floor)))
+    print(
+        f"  per channel: RMS of error / floor {float(np.sqrt(np.mean((errors / floor) ** 2))):.3f}"
+        f" ({worst} channels with a floor over 10x the median)"
+    )

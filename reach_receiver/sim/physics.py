@@ -347,10 +347,16 @@ class ReceiverPhysics:
         MTS path and the LNA together, whose noise waves are not the LNA's own
         (:meth:`effective_theta`), so these could not judge a corrected calibration.
         """
+        return float(np.sqrt(np.mean(self.calibration_errors_k(solution, data, source) ** 2)))
+
+    def calibration_errors_k(
+        self, solution: NoiseWaveSolution, data: CalibrationData, source: SourceData
+    ) -> FloatArray:
+        """``T_cal(Q) - T_true(Q)`` per channel (:meth:`calibration_error_k`)."""
         freq = data.freq_hz
         spectrum = solution.calibrate(freq, data.gamma_rec, source)
         true_t = self.true_temperature_k(source.name, source.q, freq)
-        return float(np.sqrt(np.mean((spectrum.mean - true_t) ** 2)))
+        return np.asarray(spectrum.mean - true_t, dtype=float)
 
     def enr_k(self, freq_hz: FloatArray) -> FloatArray:
         """The noise diode's excess temperature: a cubic through table 2.1's ENR (eq. 2.1).
