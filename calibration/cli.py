@@ -63,8 +63,8 @@ from .per_frequency import ChannelSolution
 from .polynomial_model import coefficient_slices
 from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .solution import CalibratedSpectrum, Solution
-from .solvers import AnySolution, band_hz, method_name, solution_noise_floor
-from .vna_systematics import DEFAULT_CORRELATION_HZ, fixed_model, reflection_systematics
+from .solvers import AnySolution, band_hz, method_name, refit, solution_noise_floor
+from .vna_systematics import DEFAULT_CORRELATION_HZ, reflection_systematics
 
 PROG = "reach-cal"
 
@@ -220,7 +220,7 @@ def cmd_apply(args: argparse.Namespace) -> int:
     systematics = None
     if args.vna_accuracy:
         systematics = reflection_systematics(
-            data, {args.source: source}, fixed_model(solution), args.seed, args.vna_accuracy,
+            data, {args.source: source}, refit(solution), args.seed, args.vna_accuracy,
             correlation_hz=args.vna_correlation_mhz * 1e6,
         )
         spectrum = spectrum.with_systematics(systematics.deviations[args.source])

@@ -167,6 +167,25 @@ def solve(
     return solver(method, choice, basis_kind)(data)
 
 
+def refit(solution: AnySolution) -> Callable[[CalibrationData], AnySolution]:
+    """A solve that fits ``solution``'s own model to other data (its method, orders, basis).
+
+    Radiometric: the evidence-best orders as one model (no average; terms the data leave to
+    the prior allowed, as in the solution itself); thesis: its orders; per channel: the same
+    per-channel solver. The refits of :mod:`calibration.vna_systematics` use it.
+    """
+    name = method_name(solution)
+    if isinstance(solution, ChannelSolution):
+        return solver(name)
+    choice = OrderChoice.fixed(solution.best_orders)
+    kind = solution.basis.kind
+    if name == "radiometric":
+        return lambda data: solve_radiometric(
+            data, choice, basis_kind=kind, average=False, allow_prior_dominated=True
+        )
+    return solver(name, choice, kind)
+
+
 def method_name(solution: AnySolution) -> str:
     """The solver's name in :data:`METHODS` (a per-channel solution stores ``least_squares``)."""
     return solution.method.replace("_", "-")

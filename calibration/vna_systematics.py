@@ -44,20 +44,11 @@ from numpy.typing import NDArray
 from .data import CalibrationData, SourceData
 from .errors import InvalidDataError
 from .measurement_uncertainty import VnaAccuracy, sample_reflections
-from .model_fit import OrderChoice
-from .per_frequency import (
-    ChannelSolution,
-    solve_bayesian_per_channel,
-    solve_least_squares_per_channel,
-)
-from .radiometric_solver import solve_radiometric
-from .solution import CalibratedSpectrum, Solution
-from .thesis_solver import solve_thesis
+from .solution import CalibratedSpectrum
 
 __all__ = [
     "DEFAULT_CORRELATION_HZ",
     "ReflectionSystematics",
-    "fixed_model",
     "reflection_systematics",
 ]
 
@@ -116,25 +107,6 @@ class ReflectionSystematics:
         )
 
 
-def fixed_model(solution: Solution | ChannelSolution) -> Resolve:
-    """A solver that fits ``solution``'s own model to another run (its orders, its basis).
-
-    Radiometric: the evidence-best orders, one model (no average); thesis: its orders;
-    per channel: the same per-channel solver (uniform prior).
-    """
-    if isinstance(solution, ChannelSolution):
-        if solution.method == "least_squares":
-            return solve_least_squares_per_channel
-        return solve_bayesian_per_channel
-    choice = OrderChoice.fixed(solution.best_orders)
-    kind = solution.basis.kind
-    if solution.method == "thesis":
-        return lambda run: solve_thesis(run, choice, basis_kind=kind)
-    return lambda run: solve_radiometric(
-        run, choice, basis_kind=kind, average=False, allow_prior_dominated=True
-    )
-
-
 def _correlation_channels(freq_hz: FloatArray, correlation_hz: float) -> float:
     step = float(np.median(np.diff(freq_hz)))
     return correlation_hz / step
@@ -161,7 +133,7 @@ def reflection_systematics(
     """Monte-Carlo the VNA's data-sheet error through ``resolve`` onto ``targets``.
 
     ``resolve`` solves a run with the model held fixed (for a polynomial solution, its
-    orders: :func:`fixed_model`); ``targets`` are the sources to
+    orders: :func:`calibration.solvers.refit`); ``targets`` are the sources to
     calibrate, on ``data``'s channels. Each draw costs one solve (about 60 ms for 12
     calibrators x 6554 channels with the radiometric solver), so 64 draws take seconds.
     """

@@ -20,8 +20,9 @@ from calibration.measurement_uncertainty import VnaAccuracy, sample_reflections
 from calibration.model_fit import OrderChoice
 from calibration.per_frequency import solve_least_squares_per_channel
 from calibration.simulate import SimulationConfig
+from calibration.solvers import refit
 from calibration.thesis_solver import solve_thesis
-from calibration.vna_systematics import fixed_model, reflection_systematics
+from calibration.vna_systematics import reflection_systematics
 
 EIGHT = ("cold", "hot", "r25", "r100", "c2r27", "c2r69", "c10open", "c10r250")
 
@@ -66,7 +67,7 @@ def test_the_spread_predicts_the_error_of_readings_off_by_the_data_sheet(
             - run.validation_temperature_k
         )
         spread = reflection_systematics(
-            data, {"ant": antenna}, fixed_model(solution), seed, 24, correlation_hz=correlation_hz
+            data, {"ant": antenna}, refit(solution), seed, 24, correlation_hz=correlation_hz
         )
         predicted = spread.std_k("ant")
         z.append(error / predicted)
@@ -81,7 +82,7 @@ def test_the_spread_scales_with_the_data_sheet_bound():
     """Reading the bound as 4 sigma instead of 2 halves the systematic error (linear regime)."""
     run = simulate_run(_config(), rng=3)
     solution = solve_radiometric(run.data)
-    resolve = fixed_model(solution)
+    resolve = refit(solution)
     targets = {"ant": run.validation}
     two = reflection_systematics(run.data, targets, resolve, 5, 24, VnaAccuracy(coverage=2.0))
     four = reflection_systematics(run.data, targets, resolve, 5, 24, VnaAccuracy(coverage=4.0))
@@ -100,7 +101,7 @@ def test_every_solver_refits_its_own_model(solver):
     else:
         solution = solve_least_squares_per_channel(run.data)
     spread = reflection_systematics(
-        run.data, {"ant": run.validation}, fixed_model(solution), 1, 8
+        run.data, {"ant": run.validation}, refit(solution), 1, 8
     )
     std = spread.std_k("ant")
     assert std.shape == run.data.freq_hz.shape
@@ -113,7 +114,7 @@ def test_a_spectrum_carries_the_draws_into_its_std_intervals_and_samples():
     run = simulate_run(_config(), rng=5)
     solution = solve_radiometric(run.data)
     spectrum = solution.calibrate(run.data.freq_hz, run.data.gamma_rec, run.validation)
-    spread = reflection_systematics(run.data, {"ant": run.validation}, fixed_model(solution), 2, 16)
+    spread = reflection_systematics(run.data, {"ant": run.validation}, refit(solution), 2, 16)
     with_sys = spectrum.with_systematics(spread.deviations["ant"])
     np.testing.assert_allclose(with_sys.std_systematic, spread.std_k("ant"))
     np.testing.assert_allclose(
@@ -132,7 +133,7 @@ def test_a_spectrum_carries_the_draws_into_its_std_intervals_and_samples():
 
 def test_bad_settings_are_refused():
     run = simulate_run(_config(), rng=6)
-    resolve = fixed_model(solve_radiometric(run.data))
+    resolve = refit(solve_radiometric(run.data))
     with pytest.raises(InvalidDataError, match="at least 2 draws"):
         reflection_systematics(run.data, {"ant": run.validation}, resolve, 0, 1)
     with pytest.raises(InvalidDataError, match="correlation length"):

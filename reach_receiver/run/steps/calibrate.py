@@ -38,12 +38,8 @@ from calibration.data import SourceData
 from calibration.errors import FileFormatError, IllPosedError
 from calibration.hdf5_io import read_solution
 from calibration.reflection_noise import reflection_variance
-from calibration.solvers import METHODS, AnySolution, solution_noise_floor, solver
-from calibration.vna_systematics import (
-    ReflectionSystematics,
-    fixed_model,
-    reflection_systematics,
-)
+from calibration.solvers import METHODS, AnySolution, refit, solution_noise_floor, solver
+from calibration.vna_systematics import ReflectionSystematics, reflection_systematics
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
@@ -164,7 +160,7 @@ def calibrate(
         predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2 + reflections))),
         systematics=(
             reflection_systematics(
-                data, {validation.name: validation}, fixed_model(solution), 0, vna_draws
+                data, {validation.name: validation}, refit(solution), 0, vna_draws
             )
             if vna_draws
             else None
