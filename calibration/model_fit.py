@@ -5,8 +5,10 @@ the :class:`~calibration.normal_equations.NormalEquations` (likelihood) and in t
 priors. With a fixed :class:`~calibration.conjugate.CoefficientPrior` (the thesis's), one
 model is chosen by a climb over orders; with a
 :class:`~calibration.shrinkage.ShrinkagePrior` (the radiometric solver's default), the
-prior's scale is marginalised, the climb moves parameters jointly, and the posterior is
-the evidence-weighted mixture of the models that carry the weight
+prior's scale is marginalised, the climb moves parameters jointly from the clearly
+measured terms (:func:`significant_orders`), scoring each step's models in one batch
+(:class:`~calibration.shrinkage.EvidenceGrid`), and the posterior is the
+evidence-weighted mixture of the models that carry the weight
 (:mod:`calibration.averaging`), or of the best model's prior scales alone.
 """
 
@@ -213,10 +215,10 @@ def _fit_shrinkage(
         inside = [
             s for s in starts if all(n <= m for n, m in zip(s, choice.max_orders, strict=True))
         ]
-        start = significant_orders(normal, prior, choice.min_orders, choice.max_orders)
+        lo, hi = choice.min_orders, choice.max_orders  # a raised limit starts at the last best
         result = search_orders_jointly(
-            log_evidence, choice.min_orders, choice.max_orders,
-            starts=inside or [start], lookahead=choice.lookahead,
+            log_evidence, lo, hi, starts=inside or [significant_orders(normal, prior, lo, hi)],
+            lookahead=choice.lookahead,
             many=log_evidences,
         )
         best, table = result.best, result.table
