@@ -72,7 +72,7 @@ def receiver_temperature_variance(
     gamma_rec_std: ArrayLike,
 ) -> FloatArray:
     """``var_T`` (K^2) from the receiver reflection's error ``gamma_rec_std`` (module docstring)."""
-    j_re, j_im = receiver_slopes(theta, gamma, gamma_rec, q)
+    j_re, j_im = _receiver_slopes(theta, gamma, gamma_rec, q)
     sigma = np.asarray(gamma_rec_std, dtype=float)
     return np.asarray((j_re**2 + j_im**2) * sigma**2 / 2.0, dtype=float)
 
@@ -94,7 +94,7 @@ def reflection_variance(
     return out
 
 
-def receiver_slopes(
+def _receiver_slopes(
     theta: FloatArray, gamma: ArrayLike, gamma_rec: ArrayLike, q: ArrayLike
 ) -> tuple[FloatArray, FloatArray]:
     """``J = dT / d(Re, Im) Gamma_rec`` (K per unit reflection), each of ``gamma``'s shape."""
