@@ -152,15 +152,14 @@ def mixture_posterior(
     by_model: dict[Orders, list[int]] = {}
     for i, (orders, _, _) in enumerate(components):
         by_model.setdefault(orders, []).append(i)
-    posteriors: list[LinearPosterior | None] = [None] * len(components)
+    solved: dict[int, LinearPosterior] = {}
     for orders, members in by_model.items():  # one stacked solve per model
         variances = prior.variances(orders)[[components[i][1] for i in members]]
-        solved = solve_many(normal, orders, np.zeros_like(variances), variances, scale_prior)
-        for i, post in zip(members, solved, strict=True):
-            posteriors[i] = post
+        posts = solve_many(normal, orders, np.zeros_like(variances), variances, scale_prior)
+        solved.update(zip(members, posts, strict=True))
+    posteriors = [solved[i] for i in range(len(components))]
     weights = np.array([w for _, _, w in components])
-    solved_all = [p for p in posteriors if p is not None]
-    return mixture_of(solved_all, weights, log_evidence, normal.n_rows)
+    return mixture_of(posteriors, weights, log_evidence, normal.n_rows)
 
 
 def mixture_of(
