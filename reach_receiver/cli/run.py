@@ -35,7 +35,7 @@ import numpy as np
 
 from calibration.identifiability import prior_dominated_line
 from calibration.per_frequency import ChannelSolution
-from calibration.solvers import AnySolution, method_name, solution_noise_floor
+from calibration.solvers import AnySolution, method_name
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig, find_site, load_site
 from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
@@ -371,7 +371,7 @@ def _print_per_channel_errors(
     """
     data, source = outcome.data, outcome.validation
     errors = sim.physics.calibration_errors_k(solution, data, source)
-    floor = solution_noise_floor(solution, data, source).std
+    floor = outcome.floor_std_k
     worst = int(np.sum(floor > 10 * np.median(floor)))
     print(
         f"  per channel: RMS of error / floor {float(np.sqrt(np.mean((errors / floor) ** 2))):.3f}"

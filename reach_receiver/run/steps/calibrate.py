@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from calibration import CalibrationData
 from calibration.data import SourceData
@@ -51,6 +52,8 @@ from reach_receiver.store.handover import ANTENNA, RECEIVER
 from ..checks import compare_with_benchmark
 from ..context import CheckFailed, RunContext
 from ..kind import RunnableKind
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -76,8 +79,9 @@ class Calibrate(Step):
 class CalibrationOutcome:
     """A calibration made during a run, and how it fares on the validation source.
 
-    ``floor_k`` is the RMS over the band of the Cramer-Rao floor of the validation
-    source's calibrated temperature, ``predicted_k`` that of the solution's calibration
+    ``floor_std_k`` is the Cramer-Rao floor of the validation source's calibrated
+    temperature per channel, ``floor_k`` its RMS over the band, ``predicted_k`` that of the
+    solution's calibration
     error (posterior); both hold the VNA's trace noise on the validation source's and the
     receiver's reflections where the run file states it (a per-channel error of the
     calibrated source that no calibration removes), and neither its radiometer noise.
@@ -89,9 +93,14 @@ class CalibrationOutcome:
     data: CalibrationData
     validation: SourceData
     handover: HandOver
-    floor_k: float
+    floor_std_k: FloatArray
     predicted_k: float
     systematics: ReflectionSystematics | None = None
+
+    @property
+    def floor_k(self) -> float:
+        """RMS over the band of the per-channel floor."""
+        return float(np.sqrt(np.mean(self.floor_std_k**2)))
 
     @property
     def systematic_k(self) -> float | None:
@@ -156,7 +165,7 @@ def calibrate(
         data=data,
         validation=validation,
         handover=handover,
-        floor_k=solution_noise_floor(solution, data, validation).rms,
+        floor_std_k=solution_noise_floor(solution, data, validation).std,
         predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2 + reflections))),
         systematics=(
             reflection_systematics(
