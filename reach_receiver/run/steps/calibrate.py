@@ -80,11 +80,11 @@ class CalibrationOutcome:
     """A calibration made during a run, and how it fares on the validation source.
 
     ``floor_std_k`` is the Cramer-Rao floor of the validation source's calibrated
-    temperature per channel, ``floor_k`` its RMS over the band, ``predicted_k`` that of the
-    solution's calibration
-    error (posterior); both hold the VNA's trace noise on the validation source's and the
-    receiver's reflections where the run file states it (a per-channel error of the
-    calibrated source that no calibration removes), and neither its radiometer noise.
+    temperature per channel, ``floor_k`` its RMS over the band, ``predicted_k`` the RMS
+    of the solution's calibration error (posterior); both hold the VNA's trace noise on
+    the validation source's and the receiver's reflections where the run file states it
+    (a per-channel error of the calibrated source that no calibration removes), and
+    neither its radiometer noise.
     The floor is that of the solution's own kind of model
     (:func:`calibration.solvers.solution_noise_floor`: polynomial or per channel).
     """
