@@ -121,7 +121,13 @@ def linearise(
 
 @dataclass
 class _LastRows:
-    """The last linearisation's rows, reflection variances, basis and layout."""
+    """The last linearisation's rows, reflection variances, operating point and layout.
+
+    Read twice: by the posterior's widening for reflection errors shared between
+    channels (:func:`_shared_errors`), and by ``build`` when the order limits are raised,
+    whose first relinearisation starts from ``theta`` (``problem is None``: no earlier
+    linearisation, so the thesis's start is used).
+    """
 
     problem: LinearisedProblem | None = None
     theta: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
