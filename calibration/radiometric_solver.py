@@ -54,6 +54,7 @@ from .data import CalibrationData
 from .errors import IllPosedError
 from .identifiability import (
     check_determined,
+    require_matched_contrast,
     require_positive_ns,
     require_temperature_contrast,
 )
@@ -197,6 +198,8 @@ def solve_radiometric(
             "at least two are needed (e.g. ambient and hot loads)"
         )
     require_temperature_contrast(data)
+    if not allow_prior_dominated:
+        require_matched_contrast(data)
     basis = PolynomialBasis.for_frequencies(data.freq_hz, basis_kind)
     terms = data.terms()
     temps, q, var_q = data.stacked()

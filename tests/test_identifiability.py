@@ -52,6 +52,29 @@ def test_loads_at_one_temperature_are_refused_naming_t_ns(solver, seed, integrat
     assert "cold 298.0 K" in str(err.value)
 
 
+@pytest.mark.parametrize(("seed", "integration_s"), [(10, 600.0), (11, 60.0), (12, 3600.0)])
+def test_one_matched_load_at_its_own_temperature_is_refused(seed, integration_s):
+    """Hot load and two reflective cables: the contrast is seen only through reflection.
+
+    Refused before the solve, not by the posterior's width, which can miss a wrong mode
+    (test_validation.py's held-out ambient load); asked to, the solver still answers."""
+    data = _four_loads(seed, integration_s).subset(["hot", "c10open", "c10short"])
+    with pytest.raises(UndeterminedError, match="fewer than two matched") as err:
+        solve_radiometric(data)
+    assert err.value.parameter == "NS"
+    assert "hot 370.0 K" in str(err.value)
+    solve_radiometric(data, allow_prior_dominated=True)
+
+
+def test_reach_set_without_its_ambient_load_keeps_matched_contrast():
+    """REACH's resistors on short cables are matched at ambient: hot against them suffices."""
+    names = ("hot", "c2r36", "c2r69", "c10open", "c10short", "r25", "r100")
+    data = simulate_run(SimulationConfig(calibrators=names, f_hi_hz=110e6), rng=13).data
+    solution = solve_radiometric(data)
+    t_ns = solution.evaluate(data.freq_hz)[3]
+    assert np.all((t_ns > 900.0) & (t_ns < 1500.0))
+
+
 @pytest.mark.parametrize("orders", [None, (5, 5, 5, 5, 5)])
 def test_temperatures_within_their_stated_error_count_as_one(orders):
     """Ambient loads 0.2 K apart, each read to 0.1 K: no contrast the data can use."""
