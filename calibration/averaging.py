@@ -91,6 +91,9 @@ def with_smooth_hypothesis(
       none exactly zero, held in by the hierarchical prior's decay (an analytic
       function's Legendre coefficients fall geometrically but do not stop).
 
+    (A third, smooth functions with a prior scale per parameter, joins these two in
+    :func:`calibration.model_fit.fit` through :func:`join_hypotheses`.)
+
     The first is what the order search explores; alone it charges a term the data only
     half see an Occam factor that drops it, and the bias it leaves is outside the error
     bars (measured: 57/84 % coverage of 68/95 % intervals where a third of the terms sit
@@ -160,6 +163,45 @@ def mixture_posterior(
     posteriors = [solved[i] for i in range(len(components))]
     weights = np.array([w for _, _, w in components])
     return mixture_of(posteriors, weights, log_evidence, normal.n_rows)
+
+
+def pool_log_evidence(grids: Mapping[Orders, FloatArray]) -> float:
+    """The total log evidence of a pool: every model and grid point, their priors included.
+
+    The grid points are equally likely (:func:`calibration.shrinkage.marginal_log_evidence`).
+    """
+    logs = np.concatenate([np.ravel(g) for g in grids.values()])
+    size = next(iter(grids.values())).size
+    top = float(np.max(logs))
+    return top + float(np.log(np.sum(np.exp(logs - top)))) - float(np.log(size))
+
+
+def join_hypotheses(
+    mixture: MixturePosterior,
+    log_z_mixture: float,
+    others: Sequence[LinearPosterior],
+    other_log_weights: FloatArray,
+) -> MixturePosterior:
+    """``mixture`` and weighted further components, at even prior odds between the two.
+
+    ``log_z_mixture`` is the total log evidence behind ``mixture`` (:func:`pool_log_evidence`)
+    and ``other_log_weights`` the components' log evidence shares, summing (by
+    ``logsumexp``) to theirs. The further components that carry :data:`MASS` of their own
+    weight are kept, at most :data:`MAX_COMPONENTS`.
+    """
+    log_w = np.asarray(other_log_weights, dtype=float)
+    top = max(float(np.max(log_w)), log_z_mixture)
+    w_other = np.exp(log_w - top)
+    order = np.argsort(-w_other)
+    cumulative = np.cumsum(w_other[order]) / np.sum(w_other)
+    kept = order[: int(np.searchsorted(cumulative, MASS)) + 1][:MAX_COMPONENTS]
+    weights = np.concatenate([mixture.weights * np.exp(log_z_mixture - top), w_other[kept]])
+    return mixture_of(
+        [*mixture.components, *(others[i] for i in kept)],
+        weights / weights.sum(),
+        mixture.log_evidence,
+        mixture.n_rows,
+    )
 
 
 def mixture_of(

@@ -19,11 +19,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .averaging import mixture_posterior, select_components, with_smooth_hypothesis
+from .averaging import (
+    SMOOTH_SHARE,
+    join_hypotheses,
+    mixture_posterior,
+    pool_log_evidence,
+    select_components,
+    with_smooth_hypothesis,
+)
 from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior, solve
 from .errors import IllPosedError
 from .normal_equations import NormalEquations
 from .order_search import search_orders, search_orders_jointly
+from .parameter_scales import BEHIND_NATS, draw_scales
 from .polynomial_model import Orders, as_orders, coefficient_slices
 from .scale_fit import ParameterScales, fit_scales
 from .shrinkage import EvidenceGrid, ShrinkagePrior, marginal_log_evidence
@@ -227,18 +235,33 @@ def _fit_shrinkage(
 
     def posterior() -> LinearPosterior:
         pool: dict[Orders, np.ndarray] = dict(grids) if average else {best: grids[best]}
-        offered = smooth and average and choice.orders is None
-        if offered and _constrained(normal, choice.max_orders):
-            # The smooth-function hypothesis (averaging.with_smooth_hypothesis), offered
-            # only where the data alone constrain every term of it, as fixed orders must be.
-            full = choice.max_orders
+        full = choice.max_orders
+        # The smooth-function hypothesis (averaging.with_smooth_hypothesis), offered only
+        # where the data alone constrain every term of it, as fixed orders must be.
+        offered = smooth and average and choice.orders is None and _constrained(normal, full)
+        if offered:
             if full not in grids:  # scored for the mixture; the search's table keeps its own
                 log_evidence(full)
             box = int(np.prod([hi - lo + 1 for lo, hi in zip(
                 choice.min_orders, choice.max_orders, strict=True)]))
             pool = with_smooth_hypothesis(grids, full, box)
         components = select_components(pool)
-        return mixture_posterior(normal, components, widths, scale_prior, table[best])
+        mixture = mixture_posterior(normal, components, widths, scale_prior, table[best])
+        if not (offered and prior.scale_per_parameter and isinstance(widths, ShrinkagePrior)):
+            return mixture
+        marginals = {m: marginal_log_evidence(g) for m, g in pool.items()}
+        if marginals[full] < max(marginals.values()) - BEHIND_NATS:
+            return mixture
+        # A third hypothesis: smooth functions with a scale per parameter (marginalised),
+        # at the smooth hypothesis's prior share, against the shared scale at even odds.
+        draws = draw_scales(
+            normal, full, prior, scale_prior, grids[full], float(np.log(SMOOTH_SHARE))
+        )
+        if draws is None:
+            return mixture
+        return join_hypotheses(
+            mixture, pool_log_evidence(pool), draws.posteriors, draws.log_weights
+        )
 
     return posterior, table
 

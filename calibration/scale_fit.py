@@ -16,7 +16,9 @@ the prior's grid, the best ``rho`` kept (empirical Bayes: MacKay 1992, *Neural C
 4, 415, "evidence approximation"; Tipping 2001 for one scale per group). The largest
 model holds every term any candidate can use, so its evidence sees each parameter's
 whole structure; the orders are then chosen, and averaged, under these fixed widths.
-Measured on the random-truth ensemble of ``benchmarks/model_choice.py``.
+Measured on the random-truth ensemble of ``benchmarks/model_choice.py``. Fitted scales
+make the error bars overconfident where the data pin them weakly (four loads);
+:mod:`calibration.parameter_scales` marginalises them instead.
 """
 
 from __future__ import annotations

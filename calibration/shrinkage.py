@@ -92,6 +92,10 @@ class ShrinkagePrior:
     per_parameter
         Give each parameter its own ``tau``, set by the data at the largest model
         (:mod:`calibration.scale_fit`), instead of one marginalised ``tau`` for all five.
+    scale_per_parameter
+        Offer the averaged posterior a third hypothesis beside the polynomials and the
+        smooth functions under one scale: smooth functions with a scale per parameter,
+        marginalised (:mod:`calibration.parameter_scales`).
     """
 
     constant_sd_k: float = 3000.0
@@ -100,6 +104,7 @@ class ShrinkagePrior:
     n_scales: int = 38
     decays: tuple[float, ...] = (1.0, 0.7, 0.5, 0.3, 0.2, 0.1, 0.03)
     per_parameter: bool = False
+    scale_per_parameter: bool = True
 
     def __post_init__(self) -> None:
         if not (0 < self.tau_min_k < self.tau_max_k and self.constant_sd_k > 0):

@@ -22,6 +22,7 @@ from calibration.conjugate import CoefficientPrior, ScalePrior, solve, solve_man
 from calibration.errors import IllPosedError
 from calibration.model_fit import OrderChoice, significant_orders
 from calibration.order_search import search_orders_jointly
+from calibration.parameter_scales import draw_scales, evidence_gradient
 from calibration.polynomial_model import full_indices
 from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
 from calibration.shrinkage import (
@@ -301,3 +302,42 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
     assert abs(averaged[0] - 0.68) <= 0.05, averaged
     assert averaged[1] >= 0.88, averaged
     assert averaged[1] - best[1] >= 0.02, (averaged, best)
+
+
+@pytest.mark.parametrize("scale_prior", [None, ScalePrior(1.0, 2.0)])
+def test_the_evidence_gradient_in_the_parameter_scales_is_exact(normal, scale_prior):
+    """MacKay's gradient of log Z in each parameter's log scale, against central differences."""
+    orders, prior = normal.max_orders, ShrinkagePrior()
+    x = np.log([0.5, 2.0, 0.1, 5.0, 1.0])
+    _, _, grad = evidence_gradient(normal, orders, x[None], 0.5, prior, scale_prior)
+    h = 1e-5
+    steps = x[None] + h * np.vstack([np.eye(5), -np.eye(5)])
+    _, log_z, _ = evidence_gradient(normal, orders, steps, 0.5, prior, scale_prior)
+    np.testing.assert_allclose(grad[0], (log_z[:5] - log_z[5:]) / (2 * h), rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("orders", [(3, 1, 3, 1, 1), (1, 4, 1, 2, 1)])
+def test_the_drawn_scales_integrate_the_evidence_as_a_grid_does(normal, orders):
+    """Two parameters with higher terms: the importance-sampled evidence with five scales
+    marginalised equals a 60 x 60 quadrature over the two that matter (the other three
+    scales move nothing and integrate to one), summed over the decays."""
+    prior, scale_prior = ShrinkagePrior(), ScalePrior(1.0, 2.0)
+    shared = EvidenceGrid(normal, prior, scale_prior).of([orders])[0]
+    draws = draw_scales(normal, orders, prior, scale_prior, shared, 0.0)
+    assert draws is not None
+    sampled = np.logaddexp.reduce(draws.log_weights)
+    axis = np.linspace(np.log(prior.tau_min_k), np.log(prior.tau_max_k), 60)
+    free = [k for k, n in enumerate(orders) if n > 1]
+    a, b = np.meshgrid(axis, axis, indexing="ij")
+    log_tau = np.zeros((a.size, 5))
+    log_tau[:, free[0]], log_tau[:, free[1]] = a.ravel(), b.ravel()
+    per_decay = []
+    for decay in prior.decays:
+        _, log_z, _ = evidence_gradient(normal, orders, log_tau, decay, prior, scale_prior)
+        grid = log_z.reshape(60, 60)  # the trapezoid rule's mean over the box
+        weights = np.outer(*(2 * [np.r_[0.5, np.ones(58), 0.5] / 59]))
+        per_decay.append(np.logaddexp.reduce((grid + np.log(weights)).ravel()))
+    quadrature = np.logaddexp.reduce(per_decay) - np.log(len(prior.decays))
+    # The draws' effective sample size is 66-143 of 336 here, a standard error of about
+    # 0.1 in log Z (measured -0.10 and -0.01 against the quadrature): three of them.
+    assert abs(sampled - quadrature) < 0.3, (sampled, quadrature)
