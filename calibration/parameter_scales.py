@@ -43,6 +43,7 @@ and looked better on 8 calibrators (1.17); the weights here match a quadrature (
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,15 +95,19 @@ class ScaleDraws:
 
 
 def variances(
-    orders: Orders, log_tau: FloatArray, decay: float, prior: ShrinkagePrior
+    orders: Sequence[int], log_tau: FloatArray, decay: float, constant_sd_k: float
 ) -> FloatArray:
-    """Prior variance of every coefficient of ``orders`` for each row of ``log_tau``: ``(S, P)``."""
+    """Prior variance of every coefficient of ``orders`` for each row of ``log_tau``: ``(S, P)``.
+
+    Parameter ``k``'s constant term has the sd ``constant_sd_k``, its term ``j >= 1``
+    ``exp(log_tau[:, k]) decay^(j - 1)``, narrowed at most :data:`MAX_NARROWING` times.
+    """
     blocks = []
     for k, n in enumerate(orders):
         power = np.arange(n) - 1.0
         narrowing = np.maximum(decay ** np.maximum(power, 0.0), 1.0 / MAX_NARROWING)
         sd = np.exp(log_tau[:, k : k + 1]) * narrowing[None, :]
-        blocks.append(np.where(power[None, :] < 0, prior.constant_sd_k**2, sd**2))
+        blocks.append(np.where(power[None, :] < 0, constant_sd_k**2, sd**2))
     return np.concatenate(blocks, axis=1)
 
 
@@ -115,7 +120,7 @@ def evidence_gradient(
     scale_prior: ScalePrior | None,
 ) -> tuple[list[LinearPosterior], FloatArray, FloatArray]:
     """Posteriors, ``log Z`` ``(S,)`` and its gradient in ``log tau`` ``(S, 5)`` (module doc)."""
-    var = variances(orders, log_tau, decay, prior)
+    var = variances(orders, log_tau, decay, prior.constant_sd_k)
     posts = solve_many(normal, orders, np.zeros_like(var), var, scale_prior)
     log_z = np.array([p.log_evidence for p in posts])
     per_coefficient = np.array([

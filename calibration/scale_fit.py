@@ -34,8 +34,9 @@ from .conjugate import ScalePrior, solve
 from .errors import IllPosedError
 from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
+from .parameter_scales import variances
 from .polynomial_model import as_orders
-from .shrinkage import MAX_NARROWING, ShrinkagePrior
+from .shrinkage import ShrinkagePrior
 
 FloatArray = NDArray[np.float64]
 
@@ -54,12 +55,8 @@ class ParameterScales:
         One row: the shape of :meth:`ShrinkagePrior.variances` with a one-point grid, so
         the mixture of :mod:`calibration.averaging` takes either.
         """
-        out = []
-        for tau, n in zip(self.tau_k, as_orders(orders), strict=True):
-            power = np.arange(n) - 1.0
-            narrowing = np.maximum(self.decay ** np.maximum(power, 0.0), 1.0 / MAX_NARROWING)
-            out.append(np.where(power < 0, self.constant_sd_k**2, (tau * narrowing) ** 2))
-        return np.concatenate(out)[None, :]
+        log_tau = np.log(np.asarray(self.tau_k))[None, :]
+        return variances(as_orders(orders), log_tau, self.decay, self.constant_sd_k)
 
 
 def fit_scales(
