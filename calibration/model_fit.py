@@ -9,7 +9,9 @@ prior's scale is marginalised, the climb moves parameters jointly from the clear
 measured terms (:func:`significant_orders`), scoring each step's models in one batch
 (:class:`~calibration.shrinkage.EvidenceGrid`), and the posterior is the
 evidence-weighted mixture of the models that carry the weight
-(:mod:`calibration.averaging`), or of the best model's prior scales alone.
+(:mod:`calibration.averaging`; with the smooth-function hypothesis under one scale and
+under a scale per parameter, :mod:`calibration.parameter_scales`), or of the best
+model's prior scales alone.
 """
 
 from __future__ import annotations
