@@ -265,9 +265,13 @@ class CalibrationData:
         gammas = np.stack([s.gamma for s in self.sources.values()])
         return design_terms(gammas, self.gamma_rec[None, :])
 
+    def temperatures(self) -> FloatArray:
+        """Every calibrator's temperature, ``(n_sources, n_channels)`` (K)."""
+        return np.stack([s.temperature_k for s in self.sources.values()])  # type: ignore[misc]
+
     def stacked(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(T, Q, var Q)`` of every calibrator, each ``(n_sources, n_channels)``."""
-        temps = np.stack([s.temperature_k for s in self.sources.values()])  # type: ignore[misc]
+        temps = self.temperatures()
         q = np.stack([s.q for s in self.sources.values()])
         var = np.stack([s.q_variance(self.channel_width_hz) for s in self.sources.values()])
         return temps, q, var

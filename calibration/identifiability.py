@@ -68,7 +68,7 @@ class UndeterminedError(IllPosedError):
 
 def temperatures_line(data: CalibrationData) -> str:
     """The calibrators' temperatures (band median) and their spread, for messages."""
-    temps, _, _ = data.stacked()
+    temps = data.temperatures()
     medians = np.median(temps, axis=1)
     listed = ", ".join(f"{n} {t:.1f} K" for n, t in zip(data.names, medians, strict=True))
     spread = float(np.max(np.ptp(temps, axis=0)))
@@ -76,7 +76,7 @@ def temperatures_line(data: CalibrationData) -> str:
 
 
 def _why_ns(data: CalibrationData) -> str:
-    temps, _, _ = data.stacked()
+    temps = data.temperatures()
     matched = [
         f"{name} {np.median(t):.1f} K"
         for name, t, src in zip(data.names, temps, data.sources.values(), strict=True)
@@ -96,7 +96,7 @@ def require_temperature_contrast(data: CalibrationData) -> None:
     "One temperature" is a spread no larger than five times the largest stated
     thermometry error (``SourceData.temperature_std_k``), or exactly none.
     """
-    temps, _, _ = data.stacked()
+    temps = data.temperatures()
     if not _contrasting(temps, data):
         raise UndeterminedError(
             f"T_NS is not determined by the calibrators {data.names}: every one is at the "
@@ -119,7 +119,7 @@ def require_matched_contrast(data: CalibrationData) -> None:
     the held-out load 63 K off with 0.14 K error bars. So the structure is checked before
     the width. Same-temperature spread as :func:`require_temperature_contrast`.
     """
-    temps, _, _ = data.stacked()
+    temps = data.temperatures()
     matched = [
         i for i, src in enumerate(data.sources.values()) if np.median(np.abs(src.gamma)) < MATCHED
     ]
