@@ -56,7 +56,7 @@ from .errors import IllPosedError
 from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
 from .polynomial_model import Orders
-from .shrinkage import MAX_NARROWING, ShrinkagePrior
+from .shrinkage import ShrinkagePrior, narrowing
 
 FloatArray = NDArray[np.float64]
 
@@ -100,13 +100,12 @@ def variances(
     """Prior variance of every coefficient of ``orders`` for each row of ``log_tau``: ``(S, P)``.
 
     Parameter ``k``'s constant term has the sd ``constant_sd_k``, its term ``j >= 1``
-    ``exp(log_tau[:, k]) decay^(j - 1)``, narrowed at most :data:`MAX_NARROWING` times.
+    ``exp(log_tau[:, k]) decay^(j - 1)`` (:func:`calibration.shrinkage.narrowing`).
     """
     blocks = []
     for k, n in enumerate(orders):
-        power = np.arange(n) - 1.0
-        narrowing = np.maximum(decay ** np.maximum(power, 0.0), 1.0 / MAX_NARROWING)
-        sd = np.exp(log_tau[:, k : k + 1]) * narrowing[None, :]
+        power = np.arange(n, dtype=np.float64) - 1.0
+        sd = np.exp(log_tau[:, k : k + 1]) * narrowing(decay, power)[None, :]
         blocks.append(np.where(power[None, :] < 0, constant_sd_k**2, sd**2))
     return np.concatenate(blocks, axis=1)
 

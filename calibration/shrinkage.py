@@ -60,6 +60,15 @@ FloatArray = NDArray[np.float64]
 MAX_NARROWING = 1e3
 
 
+def narrowing(decay: float | FloatArray, power: FloatArray) -> FloatArray:
+    """Each term's prior sd over its parameter's first-order term's: ``decay^power``.
+
+    ``power`` is the term's order less one (``-1`` on a constant, which gets 1); no term
+    is narrower than ``1 /`` :data:`MAX_NARROWING`. Broadcasts ``decay`` against ``power``.
+    """
+    return np.maximum(np.asarray(decay) ** np.maximum(power, 0.0), 1.0 / MAX_NARROWING)
+
+
 @dataclass(frozen=True)
 class ShrinkagePrior:
     """The hierarchical coefficient prior of the module docstring.
@@ -139,10 +148,9 @@ class ShrinkagePrior:
         orders = as_orders(orders)
         power = np.concatenate([np.arange(n) - 1.0 for n in orders])  # -1 on constants
         higher = power >= 0
-        decays = np.asarray(self.decays)[:, None, None]
-        narrowing = np.maximum(decays ** power[higher], 1.0 / MAX_NARROWING)  # (D, 1, H)
+        narrowed = narrowing(np.asarray(self.decays)[:, None, None], power[higher])  # (D, 1, H)
         out = np.full((len(self.decays), self.n_scales, power.size), self.constant_sd_k**2)
-        out[:, :, higher] = (self.scales_k[None, :, None] * narrowing) ** 2
+        out[:, :, higher] = (self.scales_k[None, :, None] * narrowed) ** 2
         return out.reshape(self.n_grid, power.size)
 
 
@@ -310,7 +318,7 @@ def _higher_terms(
     in one call.
     """
     decays = np.asarray(prior.decays)
-    d = np.minimum(decays[None, :, None] ** -power[:, None, :], MAX_NARROWING)  # (B, D, n)
+    d = 1.0 / narrowing(decays[None, :, None], power[:, None, :])  # (B, D, n)
     values, vectors = np.linalg.eigh(schur[:, None] / (d[..., :, None] * d[..., None, :]))
     # Rounding leaves eigenvalues uncertain by ~eps * the largest; below that they are
     # zero (the data leave the direction to the prior), never negative.
