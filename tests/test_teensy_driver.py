@@ -1,12 +1,15 @@
 """The Teensy driver against the real firmware logic (host build on a pty), faults included."""
 
+import time
+
 import pytest
+import serial
 
 from reach_receiver.clock import ManualClock
 from reach_receiver.devices.tec import Tec
 from reach_receiver.devices.tec_via_teensy import TeensyTecLink
 from reach_receiver.devices.teensy import Teensy
-from reach_receiver.errors import DeviceTimeout, InterlockError, ProtocolError
+from reach_receiver.errors import ConnectionLost, DeviceTimeout, InterlockError, ProtocolError
 from reach_receiver.frontend.paths import FrontEnd
 from reach_receiver.sim.faulty_link import FaultyLink, LinkFault
 from reach_receiver.sim.tec import TecSimulator
@@ -90,6 +93,27 @@ def test_i2c_temperatures(teensy, board):
     board.set_sensor(0x18, 24.5)
     board.set_sensor(0x1A, -3.25)
     assert teensy.temperatures() == {0x18: pytest.approx(24.5, abs=0.07), 0x1A: -3.25}
+
+
+def test_a_second_driver_on_the_same_port_is_refused(teensy, board):
+    with pytest.raises(ConnectionLost, match="cannot open serial port"):
+        Teensy(board.port, timeout_s=0.5).connect()
+    assert teensy.command("ping") == "pong"  # the first driver's line is untouched
+    teensy.close()
+    with Teensy(board.port, timeout_s=0.5) as second:
+        assert second.command("ping") == "pong"
+
+
+def test_replies_to_another_program_on_the_line_are_not_taken_for_ours(teensy, board):
+    # A program that ignores the port's lock asks for the temperatures (tags 1-64) before
+    # any sensor answers and leaves the replies unread: they wait in the line's one input
+    # queue, numbered as a driver that counts from 1 numbers its own requests.
+    with serial.Serial(board.port, timeout=0.05) as intruder:
+        intruder.write(b"".join(b"#%x temps\n" % tag for tag in range(1, 65)))
+        intruder.flush()
+        time.sleep(0.3)
+    board.set_sensor(0x18, 24.5)
+    assert teensy.temperatures() == {0x18: pytest.approx(24.5, abs=0.07)}
 
 
 @pytest.mark.parametrize("fault", [LinkFault.GARBLE, LinkFault.TRUNCATE, LinkFault.DROP])

@@ -2,7 +2,10 @@
 
 Every request is one tagged line, ``#<tag> <command>``; the reply ``OK 00 #<tag> <payload>``
 or ``ERR <code> #<tag> <reason>`` must carry the same tag, so a late reply to an earlier,
-timed-out request is recognised and dropped. All commands set absolute states, so after a
+timed-out request is recognised and dropped. Each driver starts its tags at a random
+point, so a reply to another driver that shares the line (another program that opened the
+port where the exclusive lock is not honoured) is dropped as stale too, not taken for the
+answer of a request of the same number. All commands set absolute states, so after a
 timeout or a garbled reply the driver resynchronises (a lone LF, then a tagged ``ping``)
 and repeats the request; error replies are never retried, they are the board's answer.
 Interlock refusals (codes 20-22) raise :class:`~reach_receiver.errors.InterlockError`.
@@ -20,6 +23,7 @@ from __future__ import annotations
 import itertools
 import logging
 import re
+import secrets
 import threading
 import time
 
@@ -105,7 +109,8 @@ class Teensy:
         self.transport = transport
         self.timeout_s = timeout_s
         self.retries = retries
-        self._tags = (f"{n % 0xFFFFFF:x}" for n in itertools.count(1))
+        first_tag = secrets.randbelow(0xFFFFFF)
+        self._tags = (f"{n % 0xFFFFFF:x}" for n in itertools.count(first_tag))
         self.identity = ""
         self.firmware = ""
         # Re-entrant: a request's retries resynchronise while holding it.

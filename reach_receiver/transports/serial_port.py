@@ -4,6 +4,10 @@ A thin, timed wrapper: open and close explicitly, write bytes, read up to a term
 within a deadline. The deadline is the caller's, not pyserial's per-read timeout, so a
 device that trickles bytes cannot hold a caller longer than asked. The same class serves
 real ports (``/dev/ttyACM0``) and the simulators' pseudo-terminals (``/dev/pts/N``).
+
+A port is opened for one program at a time (pyserial's ``exclusive``, an advisory
+``flock``): a second driver on the same line would interleave its requests with ours and
+could take our replies, so it is refused with a clear error instead.
 """
 
 from __future__ import annotations
@@ -56,7 +60,11 @@ class SerialTransport:
             return
         try:
             self._serial = serial.Serial(
-                self.port, baudrate=self.baudrate, timeout=0.05, write_timeout=self.timeout_s
+                self.port,
+                baudrate=self.baudrate,
+                timeout=0.05,
+                write_timeout=self.timeout_s,
+                exclusive=True,
             )
         except LINK_ERRORS as err:
             message = f"cannot open serial port {self.port}: {err}"
