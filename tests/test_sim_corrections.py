@@ -25,10 +25,11 @@ SEEDS = (11, 12, 13)
 SINGLE_RUN_BOUND = 1.6
 RMS_BOUND = 1.1
 #: Through the run layer the data themselves vary from run to run (the iTPM simulator
-#: skips spectra when the machine is busy: floors of 0.9-1.8 K for one seed, error/floor
-#: 0.43-1.66 in five runs). For a few modes (k ~ 3) error/floor is sqrt(chi2_k / k),
-#: whose 99th percentile is 1.94.
-RUN_PATH_BOUND = 2.0
+#: skips spectra when the machine is busy: floors of 0.9-1.8 K for one seed). Twelve runs
+#: of this test's seed gave error/floor 0.41-1.93, RMS 1.03: sqrt(chi2_k / k) of about
+#: k = 2 modes, whose tail is exp(-B^2) for a bound B. At B = 2 that is 1.8 % of runs
+#: (CI saw 2.42 once); at 3, 1e-4. The uncorrected path reads 18-21x.
+RUN_PATH_BOUND = 3.0
 #: Uncorrected: 18-21x the floor over seeds 1-8 (the cables' 4 K gradient alone is tens).
 UNCORRECTED_AT_LEAST = 8.0
 
