@@ -204,7 +204,10 @@ def _fit_shrinkage(
         return np.array([post.log_evidence])
 
     def log_evidences(models: Sequence[Orders]) -> list[float]:
-        rows = batch.of(models) if batch is not None else [scaled(o) for o in models]
+        if batch is not None:  # each grid point with its prior mass (tau's hyperprior)
+            rows = list(batch.of(models) + batch.prior.log_grid_weights[None, :])
+        else:
+            rows = [scaled(o) for o in models]
         values = []
         for orders, row in zip(models, rows, strict=True):
             grids[orders] = np.asarray(row)

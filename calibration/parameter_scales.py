@@ -8,7 +8,7 @@ either charged an Occam factor sized for the largest or shrunk with the wrong wi
 each parameter has its own scale, with the decay shared::
 
     c_kj | tau_k, rho ~ N(0, (tau_k rho^(j-1))^2)      (j >= 1; constants as before)
-    log tau_k ~ uniform on [log tau_min, log tau_max], independently for k = 1..5
+    log tau_k ~ as the shared tau's (shrinkage.log_scale_density), independently
     rho ~ uniform on the prior's decays
 
 and the scales are marginalised, not fitted (fitting them, type-II maximum likelihood,
@@ -56,7 +56,12 @@ from .errors import IllPosedError
 from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
 from .polynomial_model import Orders
-from .shrinkage import ShrinkagePrior, narrowing
+from .shrinkage import (
+    ShrinkagePrior,
+    log_scale_density,
+    log_scale_density_gradient,
+    narrowing,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -138,14 +143,19 @@ def _mode(
     normal: NormalEquations, orders: Orders, decay: float, prior: ShrinkagePrior,
     scale_prior: ScalePrior | None, start: FloatArray, bounds: tuple[float, float],
 ) -> tuple[FloatArray, FloatArray] | None:
-    """The mode of ``log Z`` in ``log tau`` and the Hessian of ``-log Z`` there."""
+    """The mode of ``log Z + log p(log tau)`` and the Hessian of its negative there."""
+
+    def log_posterior(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        _, log_z, grad = evidence_gradient(normal, orders, x, decay, prior, scale_prior)
+        log_p = np.sum(log_scale_density(x, prior), axis=1)
+        return log_z + log_p, grad + log_scale_density_gradient(x, prior)
 
     def negative(x: FloatArray) -> tuple[float, FloatArray]:
         try:
-            _, log_z, grad = evidence_gradient(normal, orders, x[None], decay, prior, scale_prior)
+            value, grad = log_posterior(x[None])
         except IllPosedError:
             return np.inf, np.zeros_like(x)
-        return -float(log_z[0]), -grad[0]
+        return -float(value[0]), -grad[0]
 
     result = minimize(negative, start, jac=True, method="L-BFGS-B", bounds=[bounds] * start.size)
     if not np.isfinite(result.fun):
@@ -153,7 +163,7 @@ def _mode(
     x = result.x
     shifted = x[None, :] + STEP * np.vstack([np.zeros(x.size), np.eye(x.size)])
     try:
-        _, _, grads = evidence_gradient(normal, orders, shifted, decay, prior, scale_prior)
+        _, grads = log_posterior(shifted)
     except IllPosedError:
         return None
     hessian = -(grads[1:] - grads[0]) / STEP
@@ -192,7 +202,7 @@ def draw_scales(
     rng = np.random.default_rng(SEED)
     posteriors: list[LinearPosterior] = []
     log_weights: list[FloatArray] = []
-    log_prior = -N_PARAMETERS * np.log(width) - np.log(len(prior.decays)) + log_model_prior
+    log_prior = -np.log(len(prior.decays)) + log_model_prior
     for i, decay in enumerate(prior.decays):
         if share[i] < DECAY_SHARE:
             continue
@@ -218,7 +228,8 @@ def draw_scales(
         except IllPosedError:
             continue
         posteriors.extend(posts)
-        log_weights.append(log_z + log_prior - log_q - np.log(len(x)))
+        log_p = np.sum(log_scale_density(x, prior), axis=1)
+        log_weights.append(log_z + log_p + log_prior - log_q - np.log(len(x)))
     if not posteriors:
         return None
     return ScaleDraws(tuple(posteriors), np.concatenate(log_weights))

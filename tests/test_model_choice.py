@@ -29,6 +29,7 @@ from calibration.shrinkage import (
     EvidenceGrid,
     ShrinkagePrior,
     log_evidence_scales,
+    log_scale_density,
     marginal_log_evidence,
 )
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
@@ -304,6 +305,46 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
     assert averaged[1] - best[1] >= 0.02, (averaged, best)
 
 
+def test_the_scale_prior_does_not_hang_on_the_grids_lower_end(normal):
+    """Moving ``tau_min`` from 1 mK down 11 grid steps to 0.012 mK (the old points kept):
+    under the half-Cauchy the marginal evidence of every model stays put (measured 5e-5
+    nats); uniform in ``log tau`` it moves by at least the normalisation of the longer grid,
+    log(49/38) = 0.254, and by more where the data do not bound ``tau`` from below (the
+    bias that caused: shrinkage.py)."""
+    default = ShrinkagePrior()
+    step = (default.tau_max_k / default.tau_min_k) ** (1 / (default.n_scales - 1))
+    models = [(1, 1, 1, 1, 1), (2, 1, 1, 1, 1), (3, 3, 3, 3, 3), (6, 6, 6, 6, 6)]
+
+    def marginals(**fields):
+        prior = ShrinkagePrior(**fields)
+        rows = EvidenceGrid(normal, prior, ScalePrior()).of(models) + prior.log_grid_weights
+        return np.array([marginal_log_evidence(row) for row in rows])
+
+    for s in (10.0, None):
+        near = marginals(scale_hyperprior_k=s)
+        far = marginals(
+            scale_hyperprior_k=s, tau_min_k=default.tau_min_k / step**11,
+            n_scales=default.n_scales + 11,
+        )
+        moved = np.abs(far - near)[1:]  # the first has no higher term: nothing to move
+        if s is None:
+            assert np.all(moved > 0.25), moved  # exactly 0.254 here: the data bound tau
+        else:
+            assert np.all(moved < 0.02), moved
+
+
+def test_the_grid_weights_are_the_scale_density(normal):
+    """The grid's prior masses follow the density of ``log tau`` and sum to one per decay;
+    uniform in ``log tau`` they are all equal (zero log weight)."""
+    prior = ShrinkagePrior(scale_hyperprior_k=10.0)
+    mass = np.exp(prior.log_grid_weights).reshape(len(prior.decays), prior.n_scales)
+    np.testing.assert_allclose(mass.sum(axis=1), prior.n_scales)
+    density = np.exp(log_scale_density(np.log(prior.scales_k), prior))
+    np.testing.assert_allclose(mass[0] / mass[0].sum(), density / density.sum(), rtol=1e-12)
+    assert np.argmax(density) == np.argmin(np.abs(prior.scales_k - 10.0))  # the mode at s
+    np.testing.assert_array_equal(ShrinkagePrior().log_grid_weights, 0.0)
+
+
 @pytest.mark.parametrize("scale_prior", [None, ScalePrior(1.0, 2.0)])
 def test_the_evidence_gradient_in_the_parameter_scales_is_exact(normal, scale_prior):
     """MacKay's gradient of log Z in each parameter's log scale, against central differences."""
@@ -320,7 +361,7 @@ def test_the_evidence_gradient_in_the_parameter_scales_is_exact(normal, scale_pr
 def test_the_drawn_scales_integrate_the_evidence_as_a_grid_does(normal, orders):
     """Two parameters with higher terms: the importance-sampled evidence with five scales
     marginalised equals a 60 x 60 quadrature over the two that matter (the other three
-    scales move nothing and integrate to one), summed over the decays."""
+    scales move nothing and their prior integrates to one), summed over the decays."""
     prior, scale_prior = ShrinkagePrior(), ScalePrior(1.0, 2.0)
     shared = EvidenceGrid(normal, prior, scale_prior).of([orders])[0]
     draws = draw_scales(normal, orders, prior, scale_prior, shared, 0.0)
@@ -331,12 +372,15 @@ def test_the_drawn_scales_integrate_the_evidence_as_a_grid_does(normal, orders):
     a, b = np.meshgrid(axis, axis, indexing="ij")
     log_tau = np.zeros((a.size, 5))
     log_tau[:, free[0]], log_tau[:, free[1]] = a.ravel(), b.ravel()
+    # The trapezoid rule in log tau, each node with tau's prior density there.
+    trapezoid = np.r_[0.5, np.ones(58), 0.5] * (axis[1] - axis[0])
+    along = np.log(trapezoid) + log_scale_density(axis, prior)
+    log_weights = along[:, None] + along[None, :]
     per_decay = []
     for decay in prior.decays:
         _, log_z, _ = evidence_gradient(normal, orders, log_tau, decay, prior, scale_prior)
-        grid = log_z.reshape(60, 60)  # the trapezoid rule's mean over the box
-        weights = np.outer(*(2 * [np.r_[0.5, np.ones(58), 0.5] / 59]))
-        per_decay.append(np.logaddexp.reduce((grid + np.log(weights)).ravel()))
+        grid = log_z.reshape(60, 60)
+        per_decay.append(np.logaddexp.reduce((grid + log_weights).ravel()))
     quadrature = np.logaddexp.reduce(per_decay) - np.log(len(prior.decays))
     # The draws' effective sample size is 66-143 of 336 here, a standard error of about
     # 0.1 in log Z (measured -0.10 and -0.01 against the quadrature): three of them.
