@@ -31,14 +31,16 @@ higher terms moves with ``2 log tau_k``.
 
 The solver's averaged posterior (:func:`calibration.model_fit.fit`) offers this as a third
 hypothesis about the receiver, beside polynomials and smooth functions under one scale,
-all three at even prior odds; the data weigh them through the evidence. Measured
-(``python -m benchmarks.model_choice --runs 100 --seed 100``, the same runs, actual /
-predicted error and 68/95 % coverage): smooth truths whose five parameters have their
-own sizes and decays 1.14, 61/92 % -> 1.07, 65/94 %; 8 calibrators 1.23 -> 1.22; the
-four EDGES loads 1.04 -> 1.03; the other rows unchanged (REACH-like truths do not draw it:
-:data:`BEHIND_NATS`). A prototype that left out the truncation of the proposal to the
-prior's box (the ``log_q`` correction below) over-weighted this hypothesis several-fold
-and looked better on 8 calibrators (1.17); the weights here match a quadrature (a test).
+all three at even prior odds; the data weigh them through the evidence. Measured on the
+benchmark's earlier ensembles, whose random terms were sized in the prior's shrunk sd
+(README, "Model choice"; ``python -m benchmarks.model_choice --runs 100 --seed 100``,
+the same runs, actual / predicted error and 68/95 % coverage): smooth truths whose five
+parameters have their own sizes and decays 1.14, 61/92 % -> 1.07, 65/94 %; 8 calibrators
+1.23 -> 1.22; the four EDGES loads 1.04 -> 1.03; the other rows unchanged (REACH-like
+truths do not draw it: :data:`BEHIND_NATS`). A prototype that left out the truncation of
+the proposal to the prior's box (the ``log_q`` correction below) over-weighted this
+hypothesis several-fold and looked better on 8 calibrators (1.17); the weights here
+match a quadrature (a test).
 """
 
 from __future__ import annotations
