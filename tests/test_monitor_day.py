@@ -73,7 +73,9 @@ def test_the_database_holds_one_row_per_series_every_cadence(day):
     points = database.series("reach_disk_free_bytes", start)
     assert len(points) == monitor.samples  # one row of this series per sample
     first, last = points[0].t, points[-1].t
-    assert first - start <= 6 * CADENCE_S  # the daemon and a run starting (0.1 s real)
+    # The first sample's delay is real time at 3000x (0.1 s real is 5 minutes here), which
+    # a loaded machine stretches (17 minutes once in CI): held to "before the run ends".
+    assert first - start <= 2400.0
     assert last - first >= DAY_S - 2 * CADENCE_S
     slots = round((last - first) / CADENCE_S) + 1
     gaps = np.diff([p.t for p in points])
