@@ -14,14 +14,8 @@ and keeps every evaluated model's log evidence: the table behind an "Occam's cli
 That climb still moves one parameter at a time, and stalls where the evidence wants one
 parameter up and another down together (it stopped at (2,3,3,3,3) with (3,3,3,2,3) better
 and never evaluated). :func:`search_orders_jointly` (the radiometric solver's search) adds
-every move of two parameters by one term each to the neighbourhood, and, where neither
-improves, every order of one parameter across its whole range (:func:`_line_scans`), so
-that it ends only at a model no single or paired move, and no order of any one parameter,
-improves. Without the scans the climb stopped where a parameter's terms sit on the far
-side of a valley: T_sin with terms at 2.5, 0.4 and 4.1 sigma stayed at its constant,
-orders 2 and 3 being 2.4-3.7 nats worse, while four terms were 0.6-0.8 nats better (8
-calibrators); the model average, which holds only the models evaluated, then had none of
-the weight there.
+every move of two parameters by one term each to the neighbourhood, so that it ends only
+at a model no single or paired move improves.
 """
 
 from __future__ import annotations
@@ -66,14 +60,6 @@ def _paired_moves(orders: Orders, lo: Sequence[int], hi: Sequence[int]) -> Itera
                     moved[m] += dm
                     if lo[k] <= moved[k] <= hi[k] and lo[m] <= moved[m] <= hi[m]:
                         yield tuple(moved)  # type: ignore[misc]
-
-
-def _line_scans(orders: Orders, lo: Sequence[int], hi: Sequence[int]) -> Iterable[Orders]:
-    """Every order of each parameter over its whole range, the others held."""
-    for k in range(N_PARAMETERS):
-        for n in range(lo[k], hi[k] + 1):
-            if n != orders[k]:
-                yield (*orders[:k], n, *orders[k + 1 :])  # type: ignore[misc]
 
 
 #: Scores many models in one call: one log evidence per model, in order.
@@ -139,18 +125,13 @@ def search_orders_jointly(
 
     One climb from each of ``starts`` (the smallest model when none is given): the best
     single-parameter move of up to ``lookahead`` terms while one improves, else the best
-    move of two parameters by one term each, else the best order of one parameter over its
-    whole range; it ends where none improves. ``many``, if given, scores each step's new
-    candidates in one call (:func:`_climb`).
+    move of two parameters by one term each; it ends where neither improves. ``many``,
+    if given, scores each step's new candidates in one call (:func:`_climb`).
     """
     lo, hi = as_orders(min_orders), as_orders(max_orders)
     return _climb(
         log_evidence, lo, hi, [as_orders(s) for s in starts] or [lo],
-        [
-            lambda o: _neighbours(o, lookahead, lo, hi),
-            lambda o: _paired_moves(o, lo, hi),
-            lambda o: _line_scans(o, lo, hi),
-        ],
+        [lambda o: _neighbours(o, lookahead, lo, hi), lambda o: _paired_moves(o, lo, hi)],
         many,
     )
 
