@@ -342,18 +342,24 @@ class FirmwareTeensy:
             return
         fd = proc.stdout.fileno()
         os.set_blocking(fd, False)
-        while not self._eof:
+        # Only while this is the current program: a reader that outlives close() (its join
+        # timed out on a busy machine) must not touch the next program's state: its end of
+        # file or its wake-up would end the next start() before that program's PTY line.
+        while not self._eof and proc is self._proc:
             try:
                 select.select([fd], [], [], 0.05)
             except (OSError, ValueError):
                 break
             self._drain(proc)
-        self._started.set()  # wake start() if the program died before its PTY line
+        if proc is self._proc:
+            self._started.set()  # wake start() if the program died before its PTY line
 
     def _drain(self, proc: subprocess.Popen[bytes]) -> None:
         if proc.stdout is None:
             return
         with self._read_lock:
+            if proc is not self._proc:
+                return
             while not self._eof:
                 try:
                     chunk = os.read(proc.stdout.fileno(), 65536)
