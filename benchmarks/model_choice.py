@@ -6,7 +6,10 @@ solves the same runs:
 
 * ``fixed 3000K``: the previous default, one fixed 3000 K width, the single best model;
 * ``best``: the hierarchical prior (:mod:`calibration.shrinkage`), the single best model;
-* ``averaged``: the default, the posterior averaged over models (:mod:`calibration.averaging`);
+* ``averaged``: the default, the posterior averaged over models (:mod:`calibration.averaging`)
+  under a prior scale per parameter fitted to the data (:mod:`calibration.scale_fit`);
+* ``shared scale``: averaged too, under one scale shared by the five parameters and
+  marginalised (the default until the ensembles were drawn at the data's own sd);
 * ``shrink 6``: no choice of orders: six terms of every parameter under the hierarchical
   prior, its scales marginalised (continuous shrinkage in place of dropping terms);
 * ``true orders``: the truth's orders fixed, with the fixed wide prior (an oracle: unbiased,
@@ -42,6 +45,7 @@ from calibration.model_fit import OrderChoice
 from calibration.noise_floor import noise_floor
 from calibration.noise_waves import PARAMETERS
 from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
+from calibration.shrinkage import ShrinkagePrior
 from calibration.simulate import (
     ITPM_CHANNEL_WIDTH_HZ,
     REACH_CALIBRATORS,
@@ -66,11 +70,13 @@ def _old(data: CalibrationData) -> Solution:
 
 
 Solver = Callable[[CalibrationData], Solution]
+_SHARED = RadiometricPrior(coefficients=ShrinkagePrior(per_parameter=False))
 
 METHODS: dict[str, Solver] = {
     "fixed 3000K": _old,
     "best": lambda data: solve_radiometric(data, average=False),
     "averaged": solve_radiometric,
+    "shared scale": lambda data: solve_radiometric(data, prior=_SHARED),
     "shrink 6": lambda data: solve_radiometric(data, OrderChoice.fixed((6,) * 5)),
 }
 

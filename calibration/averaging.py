@@ -91,8 +91,9 @@ def with_smooth_hypothesis(
       none exactly zero, held in by the hierarchical prior's decay (an analytic
       function's Legendre coefficients fall geometrically but do not stop).
 
-    (A third, smooth functions with a prior scale per parameter, joins these two in
-    :func:`calibration.model_fit.fit` through :func:`join_hypotheses`.)
+    (Under one shared prior scale, a third, smooth functions with a prior scale per
+    parameter, joins these two in :func:`calibration.model_fit.fit` through
+    :func:`join_hypotheses`.)
 
     The first is what the order search explores; alone it charges a term the data only
     half see an Occam factor that drops it, and the bias it leaves is outside the error

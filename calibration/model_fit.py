@@ -5,13 +5,16 @@ the :class:`~calibration.normal_equations.NormalEquations` (likelihood) and in t
 priors. With a fixed :class:`~calibration.conjugate.CoefficientPrior` (the thesis's), one
 model is chosen by a climb over orders; with a
 :class:`~calibration.shrinkage.ShrinkagePrior` (the radiometric solver's default), the
-prior's scale is marginalised, the climb moves parameters jointly from the clearly
-measured terms (:func:`significant_orders`), scoring each step's models in one batch
-(:class:`~calibration.shrinkage.EvidenceGrid`), and the posterior is the
+prior's scales are set by the data, one per parameter at the largest model
+(:mod:`calibration.scale_fit`; or one shared scale, marginalised on a grid), the climb
+moves parameters jointly from the clearly measured terms (:func:`significant_orders`),
+scoring each step's models in one batch (:meth:`ParameterScales.log_evidences
+<calibration.scale_fit.ParameterScales.log_evidences>`, or
+:class:`~calibration.shrinkage.EvidenceGrid`), and the posterior is the
 evidence-weighted mixture of the models that carry the weight
-(:mod:`calibration.averaging`; with the smooth-function hypothesis under one scale and
-under a scale per parameter, :mod:`calibration.parameter_scales`), or of the best
-model's prior scales alone.
+(:mod:`calibration.averaging`; with the smooth-function hypothesis, and under a shared
+scale also the smooth functions under a scale per parameter marginalised,
+:mod:`calibration.parameter_scales`), or of the best model's prior scales alone.
 """
 
 from __future__ import annotations
@@ -193,21 +196,14 @@ def _fit_shrinkage(
     batch = (
         EvidenceGrid(normal, widths, scale_prior) if isinstance(widths, ShrinkagePrior) else None
     )
-
-    def scaled(orders: Orders) -> np.ndarray:
-        assert isinstance(widths, ParameterScales)
-        variances = widths.variances(orders)[0]
-        try:
-            post = solve(normal, orders, np.zeros(variances.size), variances, scale_prior)
-        except IllPosedError:
-            return np.array([-np.inf])
-        return np.array([post.log_evidence])
+    grid_weights = prior.log_grid_weights  # tau's hyperprior mass at each grid point
 
     def log_evidences(models: Sequence[Orders]) -> list[float]:
         if batch is not None:  # each grid point with its prior mass (tau's hyperprior)
-            rows = list(batch.of(models) + batch.prior.log_grid_weights[None, :])
+            rows = list(batch.of(models) + grid_weights[None, :])
         else:
-            rows = [scaled(o) for o in models]
+            assert isinstance(widths, ParameterScales)
+            rows = list(widths.log_evidences(normal, models, scale_prior)[:, None])
         values = []
         for orders, row in zip(models, rows, strict=True):
             grids[orders] = np.asarray(row)

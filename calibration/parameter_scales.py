@@ -29,8 +29,10 @@ for a coefficient of prior variance ``v_i``, posterior mean ``mu`` and scale mat
 ``Sigma = s^2 Lambda^-1`` (:attr:`LinearPosterior.scale`); ``v_i`` of parameter ``k``'s
 higher terms moves with ``2 log tau_k``.
 
-The solver's averaged posterior (:func:`calibration.model_fit.fit`) offers this as a third
-hypothesis about the receiver, beside polynomials and smooth functions under one scale,
+Under the shared-scale prior (``ShrinkagePrior(per_parameter=False)``; the default fits
+a scale per parameter instead, :mod:`calibration.scale_fit`), the solver's averaged
+posterior (:func:`calibration.model_fit.fit`) offers this as a third hypothesis about
+the receiver, beside polynomials and smooth functions under one scale,
 all three at even prior odds; the data weigh them through the evidence. Measured on the
 benchmark's earlier ensembles, whose random terms were sized in the prior's shrunk sd
 (README, "Model choice"; ``python -m benchmarks.model_choice --runs 100 --seed 100``,

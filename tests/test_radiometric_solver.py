@@ -5,6 +5,7 @@ import pytest
 from scipy import stats
 
 from calibration import OrderChoice, RadiometricPrior, noise_floor, solve_radiometric, solve_thesis
+from calibration.conjugate import CoefficientPrior
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 SMALL = SimulationConfig(channel_width_hz=ITPM_CHANNEL_WIDTH_HZ * 8)
@@ -67,17 +68,24 @@ def test_beats_thesis_solver_on_average():
 
 
 def test_basis_choice_does_not_change_calibration(run):
+    """The same model space in two bases: under the fixed wide prior the calibration is the
+    same; the hierarchical prior's widths are set in each basis's own coefficients (its
+    decay is smoothness in Legendre terms), so there it may differ, but by far less than
+    the error bars (measured: 0.043 of the smallest sd)."""
     orders = OrderChoice.fixed(run.truth.parameters.orders)
     f, val = run.data.freq_hz, run.validation_noiseless
-    legendre = solve_radiometric(run.data, orders).calibrate(f, run.data.gamma_rec, val)
-    power = solve_radiometric(run.data, orders, basis_kind="power").calibrate(
-        f, run.data.gamma_rec, val
-    )
-    # Same model space; only the (wide) coefficient prior differs between bases.
-    np.testing.assert_allclose(
-        power.mean, legendre.mean, atol=0.01 * legendre.std_calibration.min()
-    )
-    np.testing.assert_allclose(power.std_calibration, legendre.std_calibration, rtol=0.01)
+    for prior, tolerance in ((RadiometricPrior(coefficients=CoefficientPrior()), 0.01),
+                             (RadiometricPrior(), 0.1)):
+        legendre = solve_radiometric(run.data, orders, prior).calibrate(f, run.data.gamma_rec, val)
+        power = solve_radiometric(run.data, orders, prior, basis_kind="power").calibrate(
+            f, run.data.gamma_rec, val
+        )
+        np.testing.assert_allclose(
+            power.mean, legendre.mean, atol=tolerance * legendre.std_calibration.min()
+        )
+        np.testing.assert_allclose(
+            power.std_calibration, legendre.std_calibration, rtol=tolerance
+        )
 
 
 def test_underestimated_noise_inflates_error_bars(run):

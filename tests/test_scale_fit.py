@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import minimize
 
 from calibration.basis import PolynomialBasis
+from calibration.conjugate import ScalePrior, solve
 from calibration.model_fit import OrderChoice
 from calibration.noise_waves import PARAMETERS
 from calibration.normal_equations import build_normal_equations
@@ -63,3 +65,64 @@ def test_the_solver_takes_the_per_parameter_prior():
     solution = solve_radiometric(data, OrderChoice(max_orders=(5, 5, 5, 5, 5)), prior)
     assert np.isfinite(solution.posterior.log_evidence)
     assert solution.metadata["model_weights"]
+
+
+@pytest.fixture(scope="module")
+def eight_cal_normal():
+    """Normal equations of an 8-calibrator run with random structure, at (6, 6, 6, 6, 6)."""
+    rng = np.random.default_rng(11)
+    truth = {
+        name: [level, *(rng.choice([-1.0, 1.0], 3) * 10 ** rng.uniform(-2, 1, 3))]
+        for name, level in LEVELS.items()
+    }
+    config = SimulationConfig(
+        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, truth_coefficients=truth,
+        calibrators=SimulationConfig().calibrators[:8],
+    )
+    run = simulate_run(config, rng=11)
+    data, orders = run.data, (6, 6, 6, 6, 6)
+    temps, q, var_q = data.stacked()
+    problem = linearise(data.terms(), temps, q, var_q, run.truth.theta(data.freq_hz))
+    basis = PolynomialBasis.for_frequencies(data.freq_hz, "legendre")
+    return build_normal_equations(
+        problem.features, problem.weights, problem.response, basis.matrix(data.freq_hz, 6),
+        orders, ridge=1.0 / ShrinkagePrior().widest_variances(orders),
+    )
+
+
+@pytest.mark.parametrize("scale_prior", [None, ScalePrior(1.0, 2.0)])
+def test_the_batched_evidence_is_the_conjugate_solvers(eight_cal_normal, scale_prior):
+    """Every model's log evidence, batched by size, equals one conjugate solve's."""
+    normal = eight_cal_normal
+    scales = ParameterScales((3.0, 0.05, 0.8, 20.0, 1e-3), 0.5, 3000.0)
+    rng = np.random.default_rng(2)
+    models = [tuple(int(n) for n in rng.integers(1, 7, 5)) for _ in range(40)]
+    models += [(1, 1, 1, 1, 1), (6, 6, 6, 6, 6)]
+    fast = scales.log_evidences(normal, models, scale_prior)
+    for orders, value in zip(models, fast, strict=True):
+        variances = scales.variances(orders)[0]
+        post = solve(normal, orders, np.zeros(variances.size), variances, scale_prior)
+        assert value == pytest.approx(post.log_evidence, abs=1e-6)
+
+
+def test_the_fitted_scales_maximise_the_largest_models_evidence(eight_cal_normal):
+    """Against an independent search (every decay, derivative-free, from the middle of the
+    range and from the fitted point): the fit is at least as good, so neither the decays
+    it skips nor its start leave a better maximum behind."""
+    normal, prior = eight_cal_normal, ShrinkagePrior(per_parameter=True)
+    orders = normal.max_orders
+    fitted = fit_scales(normal, prior, None)
+
+    def log_z(log_tau, decay):
+        scales = ParameterScales(tuple(np.exp(log_tau)), decay, prior.constant_sd_k)
+        return scales.log_evidences(normal, [orders], None)[0]
+
+    best = log_z(np.log(fitted.tau_k), fitted.decay)
+    lo, hi = np.log(prior.tau_min_k), np.log(prior.tau_max_k)
+    for decay in prior.decays:
+        for start in (np.full(5, 0.5 * (lo + hi)), np.log(fitted.tau_k)):
+            found = minimize(
+                lambda x, decay=decay: -log_z(np.clip(x, lo, hi), decay), start,
+                method="Nelder-Mead", options={"maxfev": 3000, "xatol": 1e-4, "fatol": 1e-6},
+            )
+            assert -found.fun <= best + 1e-3, (decay, -found.fun - best)
