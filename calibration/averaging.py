@@ -213,16 +213,18 @@ def mixture_of(
         max(p.orders[k] for p in posteriors) for k in range(len(posteriors[0].orders))
     )
     size = sum(envelope)
-    mean = np.zeros(size)
-    second = np.zeros((size, size))
+    embedded = np.zeros((len(posteriors), size))
+    for m, post in enumerate(posteriors):
+        embedded[m, full_indices(post.orders, envelope)] = post.mean
+    mean = w @ embedded
+    # About the mixture's mean, not as E[c c^T] - mean mean^T: the levels (about 1000 K)
+    # would cancel to a relative 1e-16 of their square, as large as a well-measured
+    # coefficient's variance, and leave the covariance indefinite.
+    spread = embedded - mean
+    covariance = (spread * w[:, None]).T @ spread
     for post, weight in zip(posteriors, w, strict=True):
         idx = full_indices(post.orders, envelope)
-        embedded = np.zeros(size)
-        embedded[idx] = post.mean
-        mean += weight * embedded
-        second[np.ix_(idx, idx)] += weight * post.covariance
-        second += weight * np.outer(embedded, embedded)
-    covariance = second - np.outer(mean, mean)
+        covariance[np.ix_(idx, idx)] += weight * post.covariance
     covariance = 0.5 * (covariance + covariance.T)
     dof = min(p.dof for p in posteriors)
     scale = covariance if np.isinf(dof) else covariance * (dof - 2.0) / dof
