@@ -32,6 +32,7 @@ coverage 33 %/61 % at 68 %/95 %); one shared ``tau`` without decay, 41 %/71 %; w
 decay, 53 %/83 %, and averaged over models 56 %/86 % (the true orders: 65 %/94 %). On
 the default REACH-like receiver, whose terms are all far above the noise, every prior
 finds the true orders.
+
 **One scale or five.** The five parameters are different physical quantities (T_NS
 about 1000 K, T_sin about 90 K), and their structures need not be alike in size: one
 ``tau`` follows the largest, and charges the terms of a parameter with less structure
