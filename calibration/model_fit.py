@@ -196,10 +196,11 @@ def _fit_shrinkage(
     batch = (
         EvidenceGrid(normal, widths, scale_prior) if isinstance(widths, ShrinkagePrior) else None
     )
-    grid_weights = prior.log_grid_weights  # tau's hyperprior mass at each grid point
+    # tau's hyperprior mass at each grid point (the shared scale's grid only)
+    grid_weights = prior.log_grid_weights if batch is not None else None
 
     def log_evidences(models: Sequence[Orders]) -> list[float]:
-        if batch is not None:  # each grid point with its prior mass (tau's hyperprior)
+        if batch is not None and grid_weights is not None:
             rows = list(batch.of(models) + grid_weights[None, :])
         else:
             assert isinstance(widths, ParameterScales)

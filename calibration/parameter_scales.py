@@ -143,20 +143,35 @@ def evidence_gradient(
     return posts, log_z, grad
 
 
-def _mode(
+def _log_posterior(
+    normal: NormalEquations, orders: Orders, x: FloatArray, decay: float,
+    prior: ShrinkagePrior, scale_prior: ScalePrior | None, hyperprior: bool,
+) -> tuple[FloatArray, FloatArray]:
+    """``log Z`` at each row of ``x`` and its gradient (with ``log p(log tau)`` added)."""
+    _, log_z, grad = evidence_gradient(normal, orders, x, decay, prior, scale_prior)
+    if not hyperprior:
+        return log_z, grad
+    log_p = np.sum(log_scale_density(x, prior), axis=1)
+    return log_z + log_p, grad + log_scale_density_gradient(x, prior)
+
+
+def maximise(
     normal: NormalEquations, orders: Orders, decay: float, prior: ShrinkagePrior,
     scale_prior: ScalePrior | None, start: FloatArray, bounds: tuple[float, float],
-) -> tuple[FloatArray, FloatArray] | None:
-    """The mode of ``log Z + log p(log tau)`` and the Hessian of its negative there."""
+    hyperprior: bool,
+) -> tuple[FloatArray, float] | None:
+    """The ``log tau`` maximising ``log Z`` (``hyperprior``: plus ``log p(log tau)``).
 
-    def log_posterior(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        _, log_z, grad = evidence_gradient(normal, orders, x, decay, prior, scale_prior)
-        log_p = np.sum(log_scale_density(x, prior), axis=1)
-        return log_z + log_p, grad + log_scale_density_gradient(x, prior)
+    Type-II maximum likelihood, or the posterior mode of the scales; the maximum is
+    returned with it, ``None`` where no scale gives a finite one. Bounded quasi-Newton
+    with the analytic gradient (:func:`evidence_gradient`) from ``start``.
+    """
 
     def negative(x: FloatArray) -> tuple[float, FloatArray]:
         try:
-            value, grad = log_posterior(x[None])
+            value, grad = _log_posterior(
+                normal, orders, x[None], decay, prior, scale_prior, hyperprior
+            )
         except IllPosedError:
             return np.inf, np.zeros_like(x)
         return -float(value[0]), -grad[0]
@@ -164,10 +179,21 @@ def _mode(
     result = minimize(negative, start, jac=True, method="L-BFGS-B", bounds=[bounds] * start.size)
     if not np.isfinite(result.fun):
         return None
-    x = result.x
+    return result.x, -float(result.fun)
+
+
+def _mode(
+    normal: NormalEquations, orders: Orders, decay: float, prior: ShrinkagePrior,
+    scale_prior: ScalePrior | None, start: FloatArray, bounds: tuple[float, float],
+) -> tuple[FloatArray, FloatArray] | None:
+    """The mode of ``log Z + log p(log tau)`` and the Hessian of its negative there."""
+    found = maximise(normal, orders, decay, prior, scale_prior, start, bounds, hyperprior=True)
+    if found is None:
+        return None
+    x = found[0]
     shifted = x[None, :] + STEP * np.vstack([np.zeros(x.size), np.eye(x.size)])
     try:
-        _, grads = log_posterior(shifted)
+        _, grads = _log_posterior(normal, orders, shifted, decay, prior, scale_prior, True)
     except IllPosedError:
         return None
     hessian = -(grads[1:] - grads[0]) / STEP

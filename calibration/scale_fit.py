@@ -44,13 +44,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
 
 from .conjugate import ScalePrior
 from .errors import IllPosedError
 from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
-from .parameter_scales import BEHIND_NATS, evidence_gradient, variances
+from .parameter_scales import BEHIND_NATS, maximise, variances
 from .polynomial_model import Orders, as_orders
 from .shrinkage import EvidenceGrid, ShrinkagePrior, log_evidence_at
 
@@ -138,7 +137,7 @@ def fit_scales(
     skipped decay, nor any start, leaves a better maximum behind.
     """
     orders = normal.max_orders
-    bounds = [(np.log(prior.tau_min_k), np.log(prior.tau_max_k))] * N_PARAMETERS
+    bounds = (float(np.log(prior.tau_min_k)), float(np.log(prior.tau_max_k)))
     shared = EvidenceGrid(normal, prior, scale_prior).of([orders])[0]
     by_decay = shared.reshape(len(prior.decays), prior.n_scales)
     best: tuple[float, ParameterScales] | None = None
@@ -146,20 +145,10 @@ def fit_scales(
         if np.max(by_decay[i]) < np.max(by_decay) - BEHIND_NATS:
             continue
         start = np.full(N_PARAMETERS, np.log(prior.scales_k[int(np.argmax(by_decay[i]))]))
-
-        def negative(log_tau: FloatArray, decay: float = decay) -> tuple[float, FloatArray]:
-            try:
-                _, log_z, grad = evidence_gradient(
-                    normal, orders, log_tau[None, :], decay, prior, scale_prior
-                )
-            except IllPosedError:
-                return np.inf, np.zeros_like(log_tau)
-            return -float(log_z[0]), -grad[0]
-
-        result = minimize(negative, start, jac=True, method="L-BFGS-B", bounds=bounds)
-        if np.isfinite(result.fun) and (best is None or result.fun < best[0]):
-            scales = tuple(float(t) for t in np.exp(result.x))
-            best = (float(result.fun), ParameterScales(scales, decay, prior.constant_sd_k))
+        found = maximise(normal, orders, decay, prior, scale_prior, start, bounds, False)
+        if found is not None and (best is None or found[1] > best[0]):
+            scales = tuple(float(t) for t in np.exp(found[0]))
+            best = (found[1], ParameterScales(scales, decay, prior.constant_sd_k))
     if best is None:
         raise IllPosedError("no prior scale gives the largest model a finite evidence")
     return best[1]
