@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,12 +112,17 @@ def variances(
     Parameter ``k``'s constant term has the sd ``constant_sd_k``, its term ``j >= 1``
     ``exp(log_tau[:, k]) decay^(j - 1)`` (:func:`calibration.shrinkage.narrowing`).
     """
-    blocks = []
-    for k, n in enumerate(orders):
-        power = np.arange(n, dtype=np.float64) - 1.0
-        sd = np.exp(log_tau[:, k : k + 1]) * narrowing(decay, power)[None, :]
-        blocks.append(np.where(power[None, :] < 0, constant_sd_k**2, sd**2))
-    return np.concatenate(blocks, axis=1)
+    owner, power = _layout(tuple(orders))
+    sd = np.exp(log_tau[:, owner]) * narrowing(decay, power)[None, :]
+    return np.where(power[None, :] < 0, constant_sd_k**2, sd**2)
+
+
+@lru_cache(maxsize=4096)
+def _layout(orders: Orders) -> tuple[NDArray[np.intp], FloatArray]:
+    """Each coefficient's parameter and its order less one (``-1`` on a constant)."""
+    owner = np.repeat(np.arange(len(orders)), orders)
+    power = np.concatenate([np.arange(n, dtype=np.float64) - 1.0 for n in orders])
+    return owner, power
 
 
 def evidence_gradient(
