@@ -5,8 +5,9 @@ the :class:`~calibration.normal_equations.NormalEquations` (likelihood) and in t
 priors. With a fixed :class:`~calibration.conjugate.CoefficientPrior` (the thesis's), one
 model is chosen by a climb over orders; with a
 :class:`~calibration.shrinkage.ShrinkagePrior` (the radiometric solver's default), the
-prior's scales are set by the data, one per parameter at the largest model
-(:mod:`calibration.scale_fit`; or one shared scale, marginalised on a grid), the climb
+prior's scales are set by the data, one per parameter (:mod:`calibration.scale_fit`:
+at the largest model, then refitted at the first search's best for a second; or one
+shared scale, marginalised on a grid), the climb
 moves parameters jointly from the clearly measured terms (:func:`significant_orders`),
 scoring each step's models in one batch (:meth:`ParameterScales.log_evidences
 <calibration.scale_fit.ParameterScales.log_evidences>`, or
@@ -187,21 +188,25 @@ def _fit_shrinkage(
     skipped: dict[Orders, str],
     smooth: bool = True,
 ) -> tuple[Deferred, dict[Orders, float]]:
-    """:func:`fit` with the prior scale marginalised (or fitted per parameter), averaged."""
+    """:func:`fit` with the prior scale marginalised (or fitted per parameter), averaged.
+
+    With widths fitted per parameter (:func:`~calibration.scale_fit.fit_scales`), the
+    search runs twice: under the widths fitted at the largest model, then from its best
+    under the widths refitted at that best; the second table is the one returned, and
+    the smooth-function hypothesis keeps the first widths
+    (:func:`_hypotheses_with_own_widths`).
+    """
     grids: dict[Orders, np.ndarray] = {}
     widths: ShrinkagePrior | ParameterScales = prior
+    smooth_widths: ParameterScales | None = None  # set where the polynomials' are refitted
     if prior.per_parameter:
         widths = fit_scales(normal, prior, scale_prior)
 
-    batch = (
-        EvidenceGrid(normal, widths, scale_prior) if isinstance(widths, ShrinkagePrior) else None
-    )
-    # tau's hyperprior mass at each grid point (the shared scale's grid only)
-    grid_weights = prior.log_grid_weights if batch is not None else None
+    batch = None if prior.per_parameter else EvidenceGrid(normal, prior, scale_prior)
 
     def log_evidences(models: Sequence[Orders]) -> list[float]:
-        if batch is not None and grid_weights is not None:
-            rows = list(batch.of(models) + grid_weights[None, :])
+        if batch is not None:  # the shared scale's grid, with tau's hyperprior mass
+            rows = list(batch.of(models) + prior.log_grid_weights[None, :])
         else:
             assert isinstance(widths, ParameterScales)
             rows = list(widths.log_evidences(normal, models, scale_prior)[:, None])
@@ -216,22 +221,29 @@ def _fit_shrinkage(
     def log_evidence(orders: Orders) -> float:
         return log_evidences([orders])[0]
 
+    def search(starts: Sequence[Orders]) -> tuple[Orders, dict[Orders, float]]:
+        lo, hi = choice.min_orders, choice.max_orders  # a raised limit starts at the last best
+        inside = [s for s in starts if all(n <= m for n, m in zip(s, hi, strict=True))]
+        result = search_orders_jointly(
+            log_evidence, lo, hi, starts=inside or [significant_orders(normal, prior, lo, hi)],
+            lookahead=choice.lookahead,
+            many=log_evidences,
+        )
+        return result.best, result.table
+
     if choice.orders is not None:
         if not allow_prior_dominated:
             check_constrained(normal, choice.orders)
         best = choice.orders
         table = {best: log_evidence(best)}
     else:
-        inside = [
-            s for s in starts if all(n <= m for n, m in zip(s, choice.max_orders, strict=True))
-        ]
-        lo, hi = choice.min_orders, choice.max_orders  # a raised limit starts at the last best
-        result = search_orders_jointly(
-            log_evidence, lo, hi, starts=inside or [significant_orders(normal, prior, lo, hi)],
-            lookahead=choice.lookahead,
-            many=log_evidences,
-        )
-        best, table = result.best, result.table
+        best, table = search(starts)
+        if isinstance(widths, ParameterScales) and max(best) > 1 and np.isfinite(table[best]):
+            smooth_widths = widths
+            widths = fit_scales(normal, prior, scale_prior, orders=best, start=widths)
+            grids.clear()
+            skipped.clear()
+            best, table = search([best])
     if not np.isfinite(table[best]):
         raise IllPosedError("no model between the order limits is constrained by the data")
 
@@ -246,6 +258,11 @@ def _fit_shrinkage(
                 log_evidence(full)
             box = int(np.prod([hi - lo + 1 for lo, hi in zip(
                 choice.min_orders, choice.max_orders, strict=True)]))
+            if smooth_widths is not None:
+                assert isinstance(widths, ParameterScales)
+                return _hypotheses_with_own_widths(
+                    normal, grids, full, box, (widths, smooth_widths), scale_prior, table[best]
+                )
             pool = with_smooth_hypothesis(grids, full, box)
         components = select_components(pool)
         mixture = mixture_posterior(normal, components, widths, scale_prior, table[best])
@@ -266,6 +283,35 @@ def _fit_shrinkage(
         )
 
     return posterior, table
+
+
+def _hypotheses_with_own_widths(
+    normal: NormalEquations,
+    grids: dict[Orders, np.ndarray],
+    full: Orders,
+    n_models: int,
+    widths: tuple[ParameterScales, ParameterScales],
+    scale_prior: ScalePrior | None,
+    log_evidence: float,
+) -> LinearPosterior:
+    """The two hypotheses of :func:`with_smooth_hypothesis`, each under its own widths.
+
+    The polynomials under the widths refitted at their evidence-best model (the first of
+    ``widths``; ``grids`` holds their evidences), every model of the box (``n_models``)
+    equally likely; the smooth functions, ``full``, under the widths fitted at the largest
+    model (the second), which is type-II maximum likelihood under that hypothesis. Prior
+    odds ``SMOOTH_SHARE : 1 - SMOOTH_SHARE`` between the two.
+    """
+    polynomials = {m: np.asarray(g) - np.log(n_models) for m, g in grids.items()}
+    mixture = mixture_posterior(
+        normal, select_components(polynomials), widths[0], scale_prior, log_evidence
+    )
+    variances = widths[1].variances(full)[0]
+    smooth = solve(normal, full, np.zeros_like(variances), variances, scale_prior)
+    odds = float(np.log(SMOOTH_SHARE / (1.0 - SMOOTH_SHARE)))
+    return join_hypotheses(
+        mixture, pool_log_evidence(polynomials), [smooth], np.array([smooth.log_evidence + odds])
+    )
 
 
 #: A term this many posterior sd from zero in the largest model's fit starts the climb.

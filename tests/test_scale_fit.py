@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
+from calibration.averaging import mixture_posterior, select_components, with_smooth_hypothesis
 from calibration.basis import PolynomialBasis
 from calibration.conjugate import ScalePrior, solve
-from calibration.model_fit import OrderChoice
+from calibration.model_fit import OrderChoice, _hypotheses_with_own_widths
 from calibration.noise_waves import PARAMETERS
 from calibration.normal_equations import build_normal_equations
 from calibration.radiometric_solver import RadiometricPrior, linearise, solve_radiometric
@@ -126,3 +127,60 @@ def test_the_fitted_scales_maximise_the_largest_models_evidence(eight_cal_normal
                 method="Nelder-Mead", options={"maxfev": 3000, "xatol": 1e-4, "fatol": 1e-6},
             )
             assert -found.fun <= best + 1e-3, (decay, -found.fun - best)
+
+
+def test_the_refit_maximises_the_chosen_models_evidence(eight_cal_normal):
+    """Refitted at a smaller model, the widths of its parameters with higher terms are at
+    least as good as an independent search's (every decay, derivative-free); a parameter
+    with one term there keeps the width fitted at the largest model."""
+    normal, prior = eight_cal_normal, ShrinkagePrior(per_parameter=True)
+    orders = (3, 1, 4, 2, 1)
+    first = fit_scales(normal, prior, None)
+    refitted = fit_scales(normal, prior, None, orders=orders, start=first)
+    held = [k for k, n in enumerate(orders) if n == 1]
+    free = [k for k, n in enumerate(orders) if n > 1]
+    assert [refitted.tau_k[k] for k in held] == [first.tau_k[k] for k in held]
+
+    def log_z(log_tau, decay):
+        full = np.log(np.asarray(first.tau_k))
+        full[free] = log_tau
+        scales = ParameterScales(tuple(np.exp(full)), decay, prior.constant_sd_k)
+        return scales.log_evidences(normal, [orders], None)[0]
+
+    best = log_z(np.log(np.asarray(refitted.tau_k))[free], refitted.decay)
+    assert best > log_z(np.log(np.asarray(first.tau_k))[free], first.decay) + 0.1
+    lo, hi = np.log(prior.tau_min_k), np.log(prior.tau_max_k)
+    for decay in prior.decays:
+        found = minimize(
+            lambda x, decay=decay: -log_z(np.clip(x, lo, hi), decay),
+            np.log(np.asarray(first.tau_k))[free],
+            method="Nelder-Mead", options={"maxfev": 3000, "xatol": 1e-4, "fatol": 1e-6},
+        )
+        assert -found.fun <= best + 1e-3, (decay, -found.fun - best)
+
+
+def test_own_widths_for_each_hypothesis_reduce_to_the_shared_pool(eight_cal_normal):
+    """With the same widths for both hypotheses, the polynomials-and-smooth mixture built
+    hypothesis by hypothesis is the one pool of :func:`with_smooth_hypothesis`: the same
+    weights, mean and covariance (to the share noted below). The polynomials' evidences
+    are set about log(box) above the largest model's (its own as the smooth component is
+    solved), so that both hypotheses and several orders carry weight."""
+    normal = eight_cal_normal
+    scales = ParameterScales((3.0, 0.05, 0.8, 20.0, 1e-3), 0.5, 3000.0)
+    full, box = normal.max_orders, 6**5
+    lifts = {(2, 1, 2, 3, 1): 9.0, (2, 2, 2, 3, 1): 8.6, (3, 1, 2, 3, 2): 9.6,
+             (4, 2, 3, 3, 1): 8.2, full: 0.0}
+    variances = scales.variances(full)[0]  # as the smooth component is solved
+    z_full = solve(normal, full, np.zeros_like(variances), variances, None).log_evidence
+    grids = {m: np.array([z_full + lift]) for m, lift in lifts.items()}
+    joined = _hypotheses_with_own_widths(normal, grids, full, box, (scales, scales), None, 0.0)
+    pooled = mixture_posterior(
+        normal, select_components(with_smooth_hypothesis(grids, full, box)), scales, None, 0.0
+    )
+    # Equal to about 1 / box: the polynomials' pool alone leaves out the largest model's
+    # own polynomial share (e^-9 of that pool, below averaging.MASS); the pool merges it.
+    assert pooled.model_weights() == pytest.approx(joined.model_weights(), abs=1e-4)
+    assert min(pooled.model_weights().values()) > 0.01  # every model carries weight
+    np.testing.assert_allclose(joined.mean, pooled.mean, rtol=1e-3)
+    sd = np.sqrt(np.diag(pooled.scale))
+    assert np.max(np.abs(joined.scale - pooled.scale) / np.outer(sd, sd)) < 1e-3
