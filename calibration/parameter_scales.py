@@ -105,15 +105,16 @@ class ScaleDraws:
 
 
 def variances(
-    orders: Sequence[int], log_tau: FloatArray, decay: float, constant_sd_k: float
+    orders: Sequence[int], log_tau: FloatArray, decay: float | FloatArray, constant_sd_k: float
 ) -> FloatArray:
     """Prior variance of every coefficient of ``orders`` for each row of ``log_tau``: ``(S, P)``.
 
     Parameter ``k``'s constant term has the sd ``constant_sd_k``, its term ``j >= 1``
-    ``exp(log_tau[:, k]) decay^(j - 1)`` (:func:`calibration.shrinkage.narrowing`).
+    ``exp(log_tau[:, k]) decay^(j - 1)`` (:func:`calibration.shrinkage.narrowing`); one
+    decay for every row, or one per row (``(S,)``).
     """
     owner, power = _layout(tuple(orders))
-    sd = np.exp(log_tau[:, owner]) * narrowing(decay, power)[None, :]
+    sd = np.exp(log_tau[:, owner]) * narrowing(np.asarray(decay)[..., None], power)
     return np.where(power[None, :] < 0, constant_sd_k**2, sd**2)
 
 
@@ -129,11 +130,14 @@ def evidence_gradient(
     normal: NormalEquations,
     orders: Orders,
     log_tau: FloatArray,
-    decay: float,
+    decay: float | FloatArray,
     prior: ShrinkagePrior,
     scale_prior: ScalePrior | None,
 ) -> tuple[list[LinearPosterior], FloatArray, FloatArray]:
-    """Posteriors, ``log Z`` ``(S,)`` and its gradient in ``log tau`` ``(S, 5)`` (module doc)."""
+    """Posteriors, ``log Z`` ``(S,)`` and its gradient in ``log tau`` ``(S, 5)`` (module doc).
+
+    ``decay``: one for every row of ``log_tau``, or one per row.
+    """
     var = variances(orders, log_tau, decay, prior.constant_sd_k)
     posts = solve_many(normal, orders, np.zeros_like(var), var, scale_prior)
     log_z = np.array([p.log_evidence for p in posts])
@@ -186,6 +190,56 @@ def maximise(
     if not np.isfinite(result.fun):
         return None
     return result.x, -float(result.fun)
+
+
+def maximise_each(
+    normal: NormalEquations, orders: Orders, decays: Sequence[float], prior: ShrinkagePrior,
+    scale_prior: ScalePrior | None, starts: FloatArray, bounds: tuple[float, float],
+) -> list[tuple[FloatArray, float] | None]:
+    """:func:`maximise` (type-II maximum likelihood) at each of ``decays`` in one search.
+
+    ``starts`` is ``(D, 5)``. The sum of the decays' ``log Z`` is separable, so its
+    maximum is each decay's; one quasi-Newton search over the stacked scales scores every
+    decay in one batched solve per step, several times faster than a search per decay
+    (the same maxima to 1e-6 nats on simulated runs). One stopping rule serves every
+    decay, so one whose evidence lies far below the others' (millions of nats, in a test)
+    can be left a few 1e-3 nats short: :func:`calibration.scale_fit.fit_scales` polishes
+    the best alone. Should the starts leave a model ill-posed, each decay is searched
+    alone.
+    """
+    rows, width = starts.shape
+    decay = np.asarray(decays, dtype=float)
+
+    def total(x: FloatArray) -> tuple[float, FloatArray]:
+        try:
+            _, log_z, grad = evidence_gradient(
+                normal, orders, x.reshape(rows, width), decay, prior, scale_prior
+            )
+        except IllPosedError:
+            return -np.inf, np.zeros_like(x)
+        return float(np.sum(log_z)), grad.ravel()
+
+    # Measured from the starts' log Z: the search's relative stopping rule then acts on the
+    # gain (nats), not on a sum of D evidences of thousands of nats each.
+    origin = total(starts.ravel())[0]
+
+    def negative(x: FloatArray) -> tuple[float, FloatArray]:
+        value, grad = total(x)
+        return origin - value, -grad
+
+    result = None
+    if np.isfinite(origin):
+        result = minimize(
+            negative, starts.ravel(), jac=True, method="L-BFGS-B", bounds=[bounds] * starts.size
+        )
+    if result is None or not np.isfinite(result.fun):
+        return [
+            maximise(normal, orders, d, prior, scale_prior, x0, bounds, False)
+            for d, x0 in zip(decays, starts, strict=True)
+        ]
+    x = result.x.reshape(rows, width)
+    _, log_z, _ = evidence_gradient(normal, orders, x, decay, prior, scale_prior)
+    return [(row, float(z)) for row, z in zip(x, log_z, strict=True)]
 
 
 def _mode(

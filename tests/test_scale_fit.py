@@ -12,6 +12,7 @@ from calibration.conjugate import ScalePrior, solve
 from calibration.model_fit import OrderChoice, _hypotheses_with_own_widths
 from calibration.noise_waves import PARAMETERS
 from calibration.normal_equations import build_normal_equations
+from calibration.parameter_scales import maximise, maximise_each
 from calibration.radiometric_solver import RadiometricPrior, linearise, solve_radiometric
 from calibration.scale_fit import ParameterScales, fit_scales
 from calibration.shrinkage import ShrinkagePrior
@@ -184,3 +185,26 @@ def test_own_widths_for_each_hypothesis_reduce_to_the_shared_pool(eight_cal_norm
     np.testing.assert_allclose(joined.mean, pooled.mean, rtol=1e-3)
     sd = np.sqrt(np.diag(pooled.scale))
     assert np.max(np.abs(joined.scale - pooled.scale) / np.outer(sd, sd)) < 1e-3
+
+
+@pytest.mark.parametrize("orders", [(6, 6, 6, 6, 6), (3, 1, 4, 2, 1)])
+def test_one_batched_search_finds_each_decays_maximum(eight_cal_normal, orders):
+    """The stacked search over every decay ends where a search per decay does: to 0.01
+    nats at each decay (its shared stopping rule, with evidences from -4e6 to 3e3 nats
+    here), and the fit, which polishes the best decay alone, to 1e-4 of their best."""
+    normal, prior = eight_cal_normal, ShrinkagePrior(per_parameter=True)
+    bounds = (float(np.log(prior.tau_min_k)), float(np.log(prior.tau_max_k)))
+    start = ParameterScales((1.0, 0.1, 3.0, 10.0, 0.01), 0.5, prior.constant_sd_k)
+    starts = np.log(np.tile(start.tau_k, (len(prior.decays), 1)))
+    batched = maximise_each(normal, orders, prior.decays, prior, None, starts, bounds)
+    alone = [
+        maximise(normal, orders, decay, prior, None, x0, bounds, False)
+        for decay, x0 in zip(prior.decays, starts, strict=True)
+    ]
+    for decay, found, one in zip(prior.decays, batched, alone, strict=True):
+        assert found is not None
+        assert one is not None
+        assert found[1] == pytest.approx(one[1], abs=0.01), decay
+    fitted = fit_scales(normal, prior, None, orders=orders, start=start)
+    value = fitted.log_evidences(normal, [orders], None)[0]
+    assert value >= max(one[1] for one in alone if one is not None) - 1e-4
