@@ -72,10 +72,14 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
     for name in ("unc", "cos", "sin", "NS", "L"):
         assert re.search(rf"^\s+{name}: ", text, re.MULTILINE)
     ratio = _number(r"distance to floor \(predicted / floor\): ([\d.]+)", text)
-    assert 0.8 < ratio < 1.3  # the radiometric solver sits at the radiometer noise floor
+    # At or below the radiometer noise floor: the Cramer-Rao bound is the unbiased
+    # estimator's at the true orders, and the widths fitted at the chosen model shrink
+    # below it (this run: predicted 0.63 of it, actual 0.57; the REACH-like ensemble's
+    # median error 0.88 of it, README "Model choice").
+    assert 0.5 < ratio < 1.3
     floor_mk = _number(r"noise floor RMS.*: ([\d.]+) mK", text)
     actual_mk = _number(r"actual calibration error RMS.*: ([\d.]+) mK", text)
-    assert 0 < actual_mk < 4 * floor_mk
+    assert 0 < actual_mk < 2 * ratio * floor_mk  # within twice its predicted error
 
 
 def test_apply_with_the_vna_accuracy_adds_its_systematic_error(run_file, tmp_path, capsys):
