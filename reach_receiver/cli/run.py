@@ -345,9 +345,12 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
         f"calibration std {1e3 * predicted:.3f} mK, distance to floor {predicted / floor:.3f}"
     )
     if outcome.systematics is not None and outcome.systematic_k is not None:
+        # The median beside the RMS: one channel where the calibrators' reflections line up
+        # can hold most of the RMS.
+        median = float(np.median(outcome.systematics.std_k(outcome.validation.name)))
         print(
             f"  VNA systematic on {outcome.validation.name!r}: {1e3 * outcome.systematic_k:.3f} "
-            f"mK RMS ({outcome.systematics.describe()})"
+            f"mK RMS, median {1e3 * median:.3f} mK ({outcome.systematics.describe()})"
         )
     if sim is not None:
         actual = sim.physics.calibration_error_k(solution, outcome.data, outcome.validation)
