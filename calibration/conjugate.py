@@ -154,11 +154,8 @@ def solve_many(
     orders = as_orders(orders)
     idx = normal.indices(orders)
     inv_var = 1.0 / prior_vars
-    precision = normal.gram[np.ix_(idx, idx)][None] + inv_var[:, :, None] * np.eye(idx.size)
-    jacobi = np.sqrt(np.diagonal(precision, axis1=1, axis2=2))
-    scaled = precision / (jacobi[:, :, None] * jacobi[:, None, :])
     try:
-        chol = np.linalg.cholesky(scaled)
+        chol, jacobi, scaled = _factorised(normal, idx, inv_var)
     except LinAlgError as err:
         raise IllPosedError(
             f"the data do not constrain a model with orders {orders}: "
@@ -168,26 +165,16 @@ def solve_many(
     inverse = np.linalg.inv(scaled) / (jacobi[:, :, None] * jacobi[:, None, :])
     inverse = 0.5 * (inverse + np.swapaxes(inverse, 1, 2))
     means = np.einsum("bij,bj->bi", inverse, rhs)
-    offsets = np.broadcast_to(normal.reference, (len(means), normal.reference.size)).copy()
-    offsets[:, idx] -= means
-    chi2 = normal.chi2_ref + 2.0 * offsets @ normal.cross + np.sum(
-        (offsets @ normal.gram) * offsets, axis=1
-    )
+    chi2 = _chi2(normal, idx, means)
     q_min = chi2 + np.sum((means - prior_means) ** 2 * inv_var, axis=1)
-    log_det_precision = 2.0 * np.sum(
-        np.log(np.diagonal(chol, axis1=1, axis2=2)) + np.log(jacobi), axis=1
-    )
-    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
-    log_z = base - 0.5 * log_det_precision - 0.5 * np.sum(np.log(prior_vars), axis=1)
+    log_z = log_evidence_from(normal, q_min, _occam(chol, jacobi, prior_vars), scale_prior)
     if scale_prior is None:
         return [
-            LinearPosterior(orders, m, c, np.inf, float(z - 0.5 * q), 1.0, float(x), normal.n_rows)
-            for m, c, z, q, x in zip(means, inverse, log_z, q_min, chi2, strict=True)
+            LinearPosterior(orders, m, c, np.inf, float(z), 1.0, float(x), normal.n_rows)
+            for m, c, z, x in zip(means, inverse, log_z, chi2, strict=True)
         ]
-    a, b = scale_prior.a, scale_prior.b
-    a_star = a + 0.5 * normal.n_rows
-    b_star = b + 0.5 * q_min
-    log_z = log_z + a * np.log(b) - a_star * np.log(b_star) + gammaln(a_star) - gammaln(a)
+    a_star = scale_prior.a + 0.5 * normal.n_rows
+    b_star = scale_prior.b + 0.5 * q_min
     return [
         LinearPosterior(
             orders, m, (bs / a_star) * c, 2.0 * a_star, float(z), float(bs / a_star), float(x),
@@ -195,3 +182,81 @@ def solve_many(
         )
         for m, c, z, bs, x in zip(means, inverse, log_z, b_star, chi2, strict=True)
     ]
+
+
+def stacked_log_evidence(
+    normal: NormalEquations,
+    idx: NDArray[np.intp],
+    prior_vars: FloatArray,
+    scale_prior: ScalePrior | None,
+) -> FloatArray:
+    """Log evidence alone of ``B`` sub-models of equal size, zero prior mean, at once.
+
+    ``idx`` ``(B, P)`` picks each model's coefficients (:meth:`NormalEquations.indices`),
+    ``prior_vars`` ``(B, P)`` their prior variances. The algebra of :func:`solve_many`
+    without the posterior covariance; raises ``LinAlgError`` where a precision is singular.
+    """
+    chol, jacobi, scaled = _factorised(normal, idx, 1.0 / prior_vars)
+    rhs = normal.rhs(idx)
+    means = np.linalg.solve(scaled, (rhs / jacobi)[:, :, None])[:, :, 0] / jacobi
+    q_min = _chi2(normal, idx, means) + np.sum(means**2 / prior_vars, axis=1)
+    return log_evidence_from(normal, q_min, _occam(chol, jacobi, prior_vars), scale_prior)
+
+
+def log_evidence_from(
+    normal: NormalEquations, q_min: FloatArray, occam: FloatArray, scale_prior: ScalePrior | None
+) -> FloatArray:
+    """Eq. 3.35 (or its known-``s^2`` form) from ``Q_min`` and the Occam term, per prior.
+
+    ``occam`` is ``-1/2 log|Lambda| - 1/2 log|V_0|``.
+    """
+    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
+    if scale_prior is None:
+        return np.asarray(base - 0.5 * q_min + occam)
+    a, b = scale_prior.a, scale_prior.b
+    a_star = a + 0.5 * normal.n_rows
+    return np.asarray(
+        base + a * np.log(b) - a_star * np.log(b + 0.5 * q_min)
+        + gammaln(a_star) - gammaln(a) + occam
+    )
+
+
+def _factorised(
+    normal: NormalEquations, idx: NDArray[np.intp], inv_var: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Cholesky factors of the Jacobi-scaled precisions ``G + V_0^-1``, with the scaling.
+
+    ``idx``: one model's coefficients ``(P,)`` for every prior, or one model per row
+    ``(B, P)``. Scaled to unit diagonal first: the precision's diagonal spans many decades
+    (a 1000 K constant beside a 1 mK-wide high term), which the factorisation would
+    otherwise feel.
+    """
+    if idx.ndim == 1:
+        block = normal.gram[np.ix_(idx, idx)]
+        precision = np.broadcast_to(block, (len(inv_var), *block.shape)).copy()
+    else:
+        precision = normal.gram[idx[:, :, None], idx[:, None, :]]
+    diagonal = np.einsum("bii->bi", precision)
+    diagonal += inv_var
+    jacobi = np.sqrt(diagonal)
+    scaled = precision / (jacobi[:, :, None] * jacobi[:, None, :])
+    return np.linalg.cholesky(scaled), jacobi, scaled
+
+
+def _chi2(normal: NormalEquations, idx: NDArray[np.intp], means: FloatArray) -> FloatArray:
+    """The weighted residual sum of squares at each of ``means``, from the moments.
+
+    ``idx`` as in :func:`_factorised`.
+    """
+    offsets = np.broadcast_to(normal.reference, (len(means), normal.reference.size)).copy()
+    offsets[np.arange(len(means))[:, None], idx] -= means
+    quadratic = np.sum((offsets @ normal.gram) * offsets, axis=1)
+    return np.asarray(normal.chi2_ref + 2.0 * offsets @ normal.cross + quadratic)
+
+
+def _occam(chol: FloatArray, jacobi: FloatArray, prior_vars: FloatArray) -> FloatArray:
+    """``-1/2 log|Lambda| - 1/2 log|V_0|`` from the scaled Cholesky factor and its scaling."""
+    log_det_precision = 2.0 * np.sum(
+        np.log(np.diagonal(chol, axis1=1, axis2=2)) + np.log(jacobi), axis=1
+    )
+    return np.asarray(-0.5 * log_det_precision - 0.5 * np.sum(np.log(prior_vars), axis=1))

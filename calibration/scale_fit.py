@@ -62,13 +62,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .conjugate import ScalePrior
+from .conjugate import ScalePrior, stacked_log_evidence
 from .errors import IllPosedError
 from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
 from .parameter_scales import BEHIND_NATS, maximise, maximise_each, variances
 from .polynomial_model import Orders, as_orders
-from .shrinkage import EvidenceGrid, ShrinkagePrior, log_evidence_at
+from .shrinkage import EvidenceGrid, ShrinkagePrior
 
 FloatArray = NDArray[np.float64]
 
@@ -97,7 +97,8 @@ class ParameterScales:
 
         The evidence of :func:`calibration.conjugate.solve` (eq. 3.35, zero prior mean),
         without the posterior's covariance: models with the same number of coefficients
-        share one stacked factorisation of their (Jacobi-scaled) precisions.
+        share one stacked factorisation
+        (:func:`~calibration.conjugate.stacked_log_evidence`).
         """
         out = np.full(len(models), -np.inf)
         groups: dict[int, list[int]] = {}
@@ -107,35 +108,12 @@ class ParameterScales:
             idx = np.stack([normal.indices(models[i]) for i in members])
             var = np.concatenate([self.variances(models[i]) for i in members])
             try:
-                out[members] = _stacked_log_evidence(normal, idx, var, scale_prior)
+                out[members] = stacked_log_evidence(normal, idx, var, scale_prior)
             except np.linalg.LinAlgError:  # one ill-posed model: score the group one by one
                 for i, row, v in zip(members, idx, var, strict=True):
                     with suppress(np.linalg.LinAlgError):
-                        out[i] = _stacked_log_evidence(normal, row[None], v[None], scale_prior)[0]
+                        out[i] = stacked_log_evidence(normal, row[None], v[None], scale_prior)[0]
         return out
-
-
-def _stacked_log_evidence(
-    normal: NormalEquations, idx: NDArray[np.intp], var: FloatArray, scale_prior: ScalePrior | None
-) -> FloatArray:
-    """Eq. 3.35 for ``B`` sub-models of equal size: ``idx`` and prior variances ``(B, P)``."""
-    precision = normal.gram[idx[:, :, None], idx[:, None, :]]
-    diagonal = np.einsum("bii->bi", precision)
-    diagonal += 1.0 / var
-    jacobi = np.sqrt(diagonal)
-    scaled = precision / (jacobi[:, :, None] * jacobi[:, None, :])
-    chol = np.linalg.cholesky(scaled)
-    rhs = np.einsum("bij,j->bi", normal.gram[idx], normal.reference) + normal.cross[idx]
-    means = np.linalg.solve(scaled, (rhs / jacobi)[:, :, None])[:, :, 0] / jacobi
-    offsets = np.broadcast_to(normal.reference, (len(idx), normal.reference.size)).copy()
-    np.subtract.at(offsets, (np.arange(len(idx))[:, None], idx), means)
-    chi2 = normal.chi2_ref + 2.0 * offsets @ normal.cross + np.sum(
-        (offsets @ normal.gram) * offsets, axis=1
-    )
-    q_min = chi2 + np.sum(means**2 / var, axis=1)
-    log_det = 2.0 * np.sum(np.log(np.einsum("bii->bi", chol)) + np.log(jacobi), axis=1)
-    occam = -0.5 * log_det - 0.5 * np.sum(np.log(var), axis=1)
-    return log_evidence_at(normal, q_min, occam, scale_prior)
 
 
 def fit_scales(

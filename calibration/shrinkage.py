@@ -72,9 +72,8 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import cho_factor, cho_solve
-from scipy.special import gammaln
 
-from .conjugate import LOG_2PI, ScalePrior
+from .conjugate import ScalePrior, log_evidence_from
 from .normal_equations import NormalEquations
 from .polynomial_model import as_orders
 
@@ -202,21 +201,6 @@ class ShrinkagePrior:
         return out.reshape(self.n_grid, power.size)
 
 
-def log_evidence_at(
-    normal: NormalEquations, q_min: FloatArray, occam: FloatArray, scale_prior: ScalePrior | None
-) -> FloatArray:
-    """Eq. 3.35 (or its known-``s^2`` form) from ``Q_min`` and the Occam term, per width."""
-    base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
-    if scale_prior is None:
-        return np.asarray(base - 0.5 * q_min + occam)
-    a, b = scale_prior.a, scale_prior.b
-    a_star = a + 0.5 * normal.n_rows
-    return np.asarray(
-        base + a * np.log(b) - a_star * np.log(b + 0.5 * q_min)
-        + gammaln(a_star) - gammaln(a) + occam
-    )
-
-
 def log_evidence_scales(
     normal: NormalEquations,
     orders: Sequence[int],
@@ -326,7 +310,7 @@ class EvidenceGrid:
             bad = np.zeros(q_h.shape, dtype=bool)
         q_min = np.maximum(q_c[:, None] + q_h, 0.0)
         occam = -0.5 * (part.log_det + log_det_h) - 0.5 * log_v0
-        return np.where(bad, -np.inf, log_evidence_at(normal, q_min, occam, self.scale_prior))
+        return np.where(bad, -np.inf, log_evidence_from(normal, q_min, occam, self.scale_prior))
 
 
 @dataclass(frozen=True)
