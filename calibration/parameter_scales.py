@@ -47,8 +47,8 @@ match a quadrature (a test).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -153,24 +153,55 @@ def evidence_gradient(
     return posts, log_z, grad
 
 
+#: ``log p(log tau)`` and its gradient at rows of ``log tau``: ``(S,)`` and ``(S, 5)``.
+LogPrior = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
+
+
+def scale_log_prior(prior: ShrinkagePrior) -> LogPrior:
+    """The hyperprior of the five scales (``prior.scale_hyperprior_k``), independent."""
+
+    def log_prior(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return np.sum(log_scale_density(x, prior), axis=1), log_scale_density_gradient(x, prior)
+
+    return log_prior
+
+
+def width_log_prior(prior: ShrinkagePrior, orders: Orders) -> LogPrior | None:
+    """The fitted widths' prior (``prior.width_hyperprior_k``) for the model ``orders``.
+
+    Only the parameters with higher terms in ``orders``: the others' ``tau_k`` is not in
+    the model, and the prior alone would move it. ``None`` where the widths have none.
+    """
+    if prior.width_hyperprior_k is None:
+        return None
+    widths = replace(prior, scale_hyperprior_k=prior.width_hyperprior_k)
+    structured = np.array([n > 1 for n in orders])
+
+    def log_prior(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        value = np.sum(log_scale_density(x, widths)[:, structured], axis=1)
+        return value, log_scale_density_gradient(x, widths) * structured
+
+    return log_prior
+
+
 def _log_posterior(
-    normal: NormalEquations, orders: Orders, x: FloatArray, decay: float,
-    prior: ShrinkagePrior, scale_prior: ScalePrior | None, hyperprior: bool,
+    normal: NormalEquations, orders: Orders, x: FloatArray, decay: float | FloatArray,
+    prior: ShrinkagePrior, scale_prior: ScalePrior | None, log_prior: LogPrior | None,
 ) -> tuple[FloatArray, FloatArray]:
-    """``log Z`` at each row of ``x`` and its gradient (with ``log p(log tau)`` added)."""
+    """``log Z`` at each row of ``x`` and its gradient (with ``log_prior`` added)."""
     _, log_z, grad = evidence_gradient(normal, orders, x, decay, prior, scale_prior)
-    if not hyperprior:
+    if log_prior is None:
         return log_z, grad
-    log_p = np.sum(log_scale_density(x, prior), axis=1)
-    return log_z + log_p, grad + log_scale_density_gradient(x, prior)
+    log_p, grad_p = log_prior(x)
+    return log_z + log_p, grad + grad_p
 
 
 def maximise(
     normal: NormalEquations, orders: Orders, decay: float, prior: ShrinkagePrior,
     scale_prior: ScalePrior | None, start: FloatArray, bounds: tuple[float, float],
-    hyperprior: bool,
+    log_prior: LogPrior | None,
 ) -> tuple[FloatArray, float] | None:
-    """The ``log tau`` maximising ``log Z`` (``hyperprior``: plus ``log p(log tau)``).
+    """The ``log tau`` maximising ``log Z`` plus ``log_prior`` (if any).
 
     Type-II maximum likelihood, or the posterior mode of the scales; the maximum is
     returned with it, ``None`` where no scale gives a finite one. Bounded quasi-Newton
@@ -180,7 +211,7 @@ def maximise(
     def negative(x: FloatArray) -> tuple[float, FloatArray]:
         try:
             value, grad = _log_posterior(
-                normal, orders, x[None], decay, prior, scale_prior, hyperprior
+                normal, orders, x[None], decay, prior, scale_prior, log_prior
             )
         except IllPosedError:
             return np.inf, np.zeros_like(x)
@@ -195,8 +226,9 @@ def maximise(
 def maximise_each(
     normal: NormalEquations, orders: Orders, decays: Sequence[float], prior: ShrinkagePrior,
     scale_prior: ScalePrior | None, starts: FloatArray, bounds: tuple[float, float],
+    log_prior: LogPrior | None = None,
 ) -> list[tuple[FloatArray, float] | None]:
-    """:func:`maximise` (type-II maximum likelihood) at each of ``decays`` in one search.
+    """:func:`maximise` at each of ``decays`` in one search.
 
     ``starts`` is ``(D, 5)``. The sum of the decays' ``log Z`` is separable, so its
     maximum is each decay's; one quasi-Newton search over the stacked scales scores every
@@ -212,8 +244,8 @@ def maximise_each(
 
     def total(x: FloatArray) -> tuple[float, FloatArray]:
         try:
-            _, log_z, grad = evidence_gradient(
-                normal, orders, x.reshape(rows, width), decay, prior, scale_prior
+            log_z, grad = _log_posterior(
+                normal, orders, x.reshape(rows, width), decay, prior, scale_prior, log_prior
             )
         except IllPosedError:
             return -np.inf, np.zeros_like(x)
@@ -234,11 +266,11 @@ def maximise_each(
         )
     if result is None or not np.isfinite(result.fun):
         return [
-            maximise(normal, orders, d, prior, scale_prior, x0, bounds, False)
+            maximise(normal, orders, d, prior, scale_prior, x0, bounds, log_prior)
             for d, x0 in zip(decays, starts, strict=True)
         ]
     x = result.x.reshape(rows, width)
-    _, log_z, _ = evidence_gradient(normal, orders, x, decay, prior, scale_prior)
+    log_z, _ = _log_posterior(normal, orders, x, decay, prior, scale_prior, log_prior)
     return [(row, float(z)) for row, z in zip(x, log_z, strict=True)]
 
 
@@ -247,13 +279,14 @@ def _mode(
     scale_prior: ScalePrior | None, start: FloatArray, bounds: tuple[float, float],
 ) -> tuple[FloatArray, FloatArray] | None:
     """The mode of ``log Z + log p(log tau)`` and the Hessian of its negative there."""
-    found = maximise(normal, orders, decay, prior, scale_prior, start, bounds, hyperprior=True)
+    log_prior = scale_log_prior(prior)
+    found = maximise(normal, orders, decay, prior, scale_prior, start, bounds, log_prior)
     if found is None:
         return None
     x = found[0]
     shifted = x[None, :] + STEP * np.vstack([np.zeros(x.size), np.eye(x.size)])
     try:
-        _, grads = _log_posterior(normal, orders, shifted, decay, prior, scale_prior, True)
+        _, grads = _log_posterior(normal, orders, shifted, decay, prior, scale_prior, log_prior)
     except IllPosedError:
         return None
     hessian = -(grads[1:] - grads[0]) / STEP

@@ -135,7 +135,13 @@ class ShrinkagePrior:
         (:mod:`calibration.parameter_scales`).
     scale_hyperprior_k
         ``None`` (default): ``log tau`` uniform on its range; else the half-Cauchy scale
-        ``s`` (K) of ``tau``'s prior (module docstring).
+        ``s`` (K) of ``tau``'s prior (module docstring). For the marginalised scales: the
+        shared grid's and the third hypothesis's draws.
+    width_hyperprior_k
+        ``None`` (default): the fitted ``tau_k`` (``per_parameter``) are type-II maximum
+        likelihood; else the half-Cauchy scale (K) of a prior on each, and the widths are
+        the mode of their posterior in ``log tau_k`` (:mod:`calibration.scale_fit`, which
+        gives what it changes and why it is not the default).
     """
 
     constant_sd_k: float = 3000.0
@@ -146,14 +152,17 @@ class ShrinkagePrior:
     per_parameter: bool = True
     scale_per_parameter: bool = True
     scale_hyperprior_k: float | None = None
+    width_hyperprior_k: float | None = None
 
     def __post_init__(self) -> None:
         if not (0 < self.tau_min_k < self.tau_max_k and self.constant_sd_k > 0):
             raise ValueError("need 0 < tau_min_k < tau_max_k and constant_sd_k > 0")
         if self.n_scales < 2:
             raise ValueError("n_scales must be at least 2")
-        if self.scale_hyperprior_k is not None and not self.scale_hyperprior_k > 0:
-            raise ValueError("scale_hyperprior_k must be positive (or None)")
+        for name in ("scale_hyperprior_k", "width_hyperprior_k"):
+            value = getattr(self, name)
+            if value is not None and not value > 0:
+                raise ValueError(f"{name} must be positive (or None)")
         if not self.decays or not all(0 < r <= 1 for r in self.decays):
             raise ValueError("decays must be in (0, 1]")
 
