@@ -151,10 +151,12 @@ def fit_scales(
 ) -> ParameterScales:
     """The ``tau_k`` and decay maximising the evidence of ``orders`` (module docstring).
 
-    ``orders`` defaults to the largest model. ``tau_k`` is searched in ``log`` between the
-    prior's ``tau_min_k`` and ``tau_max_k`` (bounded quasi-Newton with the evidence's
-    analytic gradient, :func:`calibration.parameter_scales.evidence_gradient`) at every
-    decay in one batched search (:func:`~calibration.parameter_scales.maximise_each`),
+    With ``prior.width_hyperprior_k`` set, the evidence times the widths' prior (their
+    posterior mode) instead. ``orders`` defaults to the largest model. ``tau_k`` is
+    searched in ``log`` between the prior's ``tau_min_k`` and ``tau_max_k`` (bounded
+    quasi-Newton with the evidence's analytic gradient,
+    :func:`calibration.parameter_scales.evidence_gradient`) at every decay in one batched
+    search (:func:`~calibration.parameter_scales.maximise_each`),
     from ``start`` if given (and never ending below it), else from the shared scale
     that maximises the evidence at that decay (:class:`~calibration.shrinkage.EvidenceGrid`,
     one batch). A parameter with one term in ``orders`` has no ``tau_k`` in its evidence
