@@ -39,7 +39,7 @@ from .normal_equations import NormalEquations
 from .order_search import search_orders, search_orders_jointly
 from .parameter_scales import BEHIND_NATS, draw_scales
 from .polynomial_model import Orders, as_orders, coefficient_slices
-from .scale_fit import ParameterScales, fit_scales
+from .scale_fit import ParameterScales, fit_largest, fit_scales
 from .shrinkage import EvidenceGrid, ShrinkagePrior, marginal_log_evidence
 
 Prior = CoefficientPrior | ShrinkagePrior
@@ -200,7 +200,7 @@ def _fit_shrinkage(
     widths: ShrinkagePrior | ParameterScales = prior
     smooth_widths: ParameterScales | None = None  # set where the polynomials' are refitted
     if prior.per_parameter:
-        widths = fit_scales(normal, prior, scale_prior)
+        widths, prior = fit_largest(normal, prior, scale_prior)
 
     batch = None if prior.per_parameter else EvidenceGrid(normal, prior, scale_prior)
 

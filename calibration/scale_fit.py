@@ -1,4 +1,4 @@
-"""Each parameter's own prior scale, set by the data (type-II maximum likelihood).
+"""Each parameter's own prior scale, set by the data.
 
 The hierarchical prior of :mod:`calibration.shrinkage` gives the higher Legendre terms of
 all five parameters one scale ``tau``. When their structures differ in size (a T_NS with
@@ -7,80 +7,76 @@ the large one and charges the small parameter's terms an Occam factor of
 ``log(tau / posterior sd)`` sized for the large one: real terms of the small parameter
 are dropped, and the bias they leave lies outside the error bars.
 
-Here each parameter ``k`` has its own scale, with the decay ``rho`` shared::
+Here each parameter ``k`` has its own scale, with the decay ``rho`` shared, and the
+scales share a half-Cauchy prior whose scale ``s`` is the receiver's::
 
     c_k0 ~ N(0, constant_sd^2),    c_kj ~ N(0, (tau_k rho^(j-1))^2)   (j >= 1)
+    tau_k | s ~ half-Cauchy(s)
 
-and ``(tau_1..tau_5)`` maximise the evidence of one model, for each ``rho`` of the
-prior's grid, the best ``rho`` kept (empirical Bayes: MacKay 1992, *Neural Comput.* 4,
-415, "evidence approximation"; Tipping 2001 for one scale per group). Which model is
-the question of each hypothesis of :mod:`calibration.averaging`:
+The widths are set by the data in two levels (empirical Bayes), for each ``rho`` of the
+prior's grid, the best ``rho`` kept:
+
+1. ``tau_k`` maximising the evidence of the largest model alone (type-II maximum
+   likelihood: MacKay 1992, *Neural Comput.* 4, 415; Tipping 2001 for one scale per
+   group). A parameter whose structure the data cannot see gets the range's floor
+   (1 mK) here: the evidence is flat below the data's reach and the Occam factor keeps
+   falling. Its higher terms would then cost nothing and carry no variance, and the
+   error bars would miss whatever structure below the data's reach it has.
+2. ``s`` from the widths off the floor (:func:`width_scale`, the half-Cauchy scale most
+   likely to have given them): the size of the structure this receiver has.
+3. ``tau_k`` again, as the mode of their posterior in ``log tau_k`` under that prior
+   (:func:`fit_largest`). The prior's density in ``log tau`` grows as ``tau`` below
+   ``s``, so an unseen parameter's width sits where the evidence starts to fall, a few
+   posterior sd up, never on the floor (a boundary-avoiding prior: Chung et al. 2013,
+   *Psychometrika* 78, 685; the half-Cauchy for hierarchical scales: Gelman 2006,
+   *Bayesian Anal.* 1, 515); a seen parameter's width moves little (tests).
+
+Which model is the question of each hypothesis of :mod:`calibration.averaging`:
 
 * **smooth functions** (every term up to the box's edge): the largest model. It holds
   every term any candidate can use, so its evidence sees each parameter's whole
   structure; the orders are first searched under these widths.
 * **polynomials**: the evidence-best model of that search. The widths are refitted
-  there, from the first, for the parameters with higher terms in it (a parameter with
-  one term has no ``tau_k`` in its evidence and keeps its width), and the orders
-  searched again from that best under the new widths; the polynomials are averaged
-  under them and the smooth functions under the first
+  there (the same prior), from the first, for the parameters with higher terms in it (a
+  parameter with one term has no ``tau_k`` in its evidence and keeps its width), and the
+  orders searched again from that best under the new widths; the polynomials are
+  averaged under them and the smooth functions under the first
   (:func:`calibration.model_fit._hypotheses_with_own_widths`).
 
-This is the solver's default. Measured on the benchmark's ensembles, whose random terms
-are drawn at 0.3-30 times the data's own posterior sd
-(``python -m benchmarks.model_choice --runs 100 --seed 100``; median error / floor, RMS
-over runs, actual / predicted error and 68/95 % coverage):
+Measured on the benchmark's ensembles, whose random terms are drawn at 0.3-30 times the
+data's own posterior sd (``python -m benchmarks.model_choice --runs 100 --seed 100``, the
+same runs; median error / floor, RMS over runs, actual / predicted error and 68/95 %
+coverage; README, "Model choice", for every row):
 
-* against one marginalised shared scale on the same runs: 8 calibrators 1.063, 1.181,
-  1.15, 64/94 % against 1.011, 1.142, 1.16, 64/92 %; the four EDGES loads 0.994, 1.110,
-  1.08, 67/92 % against 1.036, 1.142, 1.24, 63/89 %; smooth truths 0.637, 0.656, 1.06,
-  66/94 % against 0.682, 0.718, 1.15, 65/91 %; random truths with 12 calibrators 0.946,
-  1.058, 1.01, 66/95 % against 0.965, 1.080, 1.07, 65/93 %; the REACH-like, weak-term and
-  VNA-noise rows within 0.05.
-* against the widths fitted at the largest model alone (the default before the refit):
-  8 calibrators 1.090, 1.209, 1.11, 66/94 %; the four loads 1.047, 1.142, 1.09, 66/92 %;
-  random truths with 12 calibrators 0.994, 1.105, 1.00, 66/95 %; the accuracy
-  benchmark's median 0.98 (now 0.95). Those widths are tuned to the model with every
-  term: where the data constrain least that model took most of the weight in the worst
-  runs, and its extra terms added variance; the polynomials' own widths cut that.
-  Refitting for both hypotheses (the smooth one under the polynomials' widths too) made
-  the error bars short instead: 8 calibrators 1.018, 1.174, 1.19, 61/93 %.
+* the default: 8 calibrators 1.048, 1.184, 1.08, 66/95 %; the four EDGES loads
+  1.007, 1.115, 1.02, 70/94 %; every other row within the issue's bounds.
+* type-II widths alone (``width_scale_from_data=False``, the default before): 8
+  calibrators 1.063, 1.181, 1.15, 64/94 %; the four loads 0.994, 1.110, 1.08, 67/92 %:
+  error bars short where the data see least.
+* a fixed scale instead of the receiver's (``width_hyperprior_k``): 10 K, the size of the
+  REACH-like simulation's first-order terms, 8 calibrators 1.073, 1.180, 1.10, 64/94 %,
+  the four loads 1.025, 1.122, 1.04, 68/94 %, the smooth truths 64.6 % in the 68 %
+  interval; 1 K, 1.043, 1.179, 1.08, 66/95 % and 0.988, 1.105, 1.01, 69/94 %; 100 K and
+  3000 K, 8 calibrators 1.096, 1.189, 1.13 and 1.095, 1.198, 1.12. A fixed scale decides
+  part of the answer; the one set by the data needs none.
+* one marginalised shared scale: 8 calibrators 1.011, 1.142, 1.16, 64/92 %; the four
+  loads 1.036, 1.142, 1.24, 63/89 %; smooth truths 0.682, 0.718, 1.15, 65/91 %.
+* the widths fitted at the largest model alone, for both hypotheses: 8 calibrators 1.090,
+  1.209, 1.11, 66/94 % (type-II); refitted for both (the smooth hypothesis under the
+  polynomials' widths too): 1.018, 1.174, 1.19, 61/93 %.
 
-(On the benchmark's earlier ensembles, whose terms were sized in the shared prior's
-shrunk sd and mostly undetectable, fitted scales looked worse than the marginalised one
-on the four loads; that comparison did not survive honest truths.) Charging the fitted
-widths a Laplace Occam factor per parameter with structure (the largest model's Hessian
-in ``log tau``) moved nothing (8 calibrators 1.11 -> 1.11).
-
-A parameter whose structure the data cannot see gets, by type-II maximum likelihood, the
-range's floor (1 mK): the evidence is flat below the data's reach and the Occam factor
-keeps falling, so its higher terms then cost nothing and carry no variance (a test).
-``ShrinkagePrior(width_hyperprior_k=s)`` takes instead the mode of each ``tau_k``'s
-posterior in ``log tau_k`` under a half-Cauchy prior of scale ``s``, whose density in
-``log tau`` grows as ``tau`` below ``s``: the mode sits where the evidence starts to fall,
-a few posterior sd up, never on the floor (a boundary-avoiding prior: Chung et al. 2013,
-*Psychometrika* 78, 685; the half-Cauchy for hierarchical scales: Gelman 2006, *Bayesian
-Anal.* 1, 515). It is not the default: its scale then decides part of the answer, and the
-scale the receiver's physics suggests did not measure better. On the benchmark (the same
-runs; 8 calibrators, then the four loads: median, RMS, actual / predicted, 68/95 %):
-
-* type-II (the default): 1.063, 1.181, 1.145, 64/94 %; 0.994, 1.110, 1.08, 67/92 %.
-* ``s`` = 10 K, the size of the REACH-like simulation's first-order terms (1.5-25 K,
-  :func:`calibration.simulate.default_truth_coefficients`): 1.073, 1.180, 1.100, 64/94 %;
-  1.025, 1.122, 1.04, 68/94 %; the smooth truths' 68 % interval at 64.6 %: as many of the
-  issue's bounds missed (six) as type-II.
-* ``s`` = 1 K: 1.043, 1.179, 1.078, 66/95 %; 0.988, 1.105, 1.01, 69/94 %; every other
-  ensemble within its bounds, two missed in all (RMS over runs, both). The benchmark's
-  random terms are drawn at 0.3-30 posterior sd, mostly below 1 K: this scale fits the
-  ensemble, not an argument from the receiver.
-* ``s`` = 100 K and 3000 K: 1.096, 1.189, 1.127 and 1.095, 1.198, 1.117 (8 calibrators).
+Tried and not kept (8 calibrators, type-II widths): a Laplace Occam factor for the
+widths (1.11 -> 1.11 actual/predicted); the widths refitted at each of the 20 leading
+models (1.064, 1.178, 1.14); the widths marginalised by importance sampling
+(:func:`calibration.parameter_scales.draw_scales`) at the 1-20 leading models and the
+smooth one (1.02-1.05, 1.16-1.17, 1.11-1.12, at 1.5-3 times the solve's time).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from contextlib import suppress
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -197,3 +193,46 @@ def fit_scales(
     if best is None or not np.isfinite(best[0]):
         raise IllPosedError(f"no prior scale gives the model {orders} a finite evidence")
     return best[1]
+
+
+#: A width within this factor of the range's floor is on it (collapsed: the data see no
+#: structure there), and says nothing of the scale of the structure they do see.
+ON_FLOOR = 1.01
+
+
+def width_scale(widths: ParameterScales, prior: ShrinkagePrior) -> float | None:
+    """The half-Cauchy scale most likely to have given the widths off the floor (K).
+
+    Maximises ``sum_k log p(tau_k | s)`` with ``p(tau | s) = 2 / (pi s (1 + (tau/s)^2))``:
+    ``sum_k (tau_k^2 - s^2) / (tau_k^2 + s^2) = 0``, one root between the smallest and
+    largest width (the geometric mean of two). ``None`` where every width is on the floor.
+    """
+    tau = np.asarray(widths.tau_k)
+    tau = tau[tau > ON_FLOOR * prior.tau_min_k]
+    if tau.size == 0:
+        return None
+    lo, hi = float(np.log(tau.min())), float(np.log(tau.max()))
+    for _ in range(60):  # bisection in log s: the sum falls as s grows
+        mid = 0.5 * (lo + hi)
+        r2 = (tau / np.exp(mid)) ** 2
+        lo, hi = (mid, hi) if np.sum((r2 - 1.0) / (r2 + 1.0)) > 0 else (lo, mid)
+    return float(np.exp(0.5 * (lo + hi)))
+
+
+def fit_largest(
+    normal: NormalEquations, prior: ShrinkagePrior, scale_prior: ScalePrior | None
+) -> tuple[ParameterScales, ShrinkagePrior]:
+    """The widths at the largest model and the prior later fits use (module docstring).
+
+    With ``prior.width_scale_from_data`` (and no scale given), type-II maximum likelihood
+    first; its widths set the half-Cauchy scale (:func:`width_scale`), and the widths are
+    fitted again under that prior, as every later fit (the refit) is.
+    """
+    widths = fit_scales(normal, prior, scale_prior)
+    if prior.width_hyperprior_k is not None or not prior.width_scale_from_data:
+        return widths, prior
+    scale = width_scale(widths, prior)
+    if scale is None:
+        return widths, prior
+    prior = replace(prior, width_hyperprior_k=scale)
+    return fit_scales(normal, prior, scale_prior), prior

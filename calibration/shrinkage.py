@@ -138,10 +138,14 @@ class ShrinkagePrior:
         ``s`` (K) of ``tau``'s prior (module docstring). For the marginalised scales: the
         shared grid's and the third hypothesis's draws.
     width_hyperprior_k
-        ``None`` (default): the fitted ``tau_k`` (``per_parameter``) are type-II maximum
-        likelihood; else the half-Cauchy scale (K) of a prior on each, and the widths are
-        the mode of their posterior in ``log tau_k`` (:mod:`calibration.scale_fit`, which
-        gives what it changes and why it is not the default).
+        The half-Cauchy scale (K) of a prior on each fitted ``tau_k`` (``per_parameter``):
+        the widths are then the mode of their posterior in ``log tau_k``
+        (:mod:`calibration.scale_fit`). ``None`` (default): set by the data when
+        ``width_scale_from_data``, else no prior (type-II maximum likelihood).
+    width_scale_from_data
+        Set the widths' half-Cauchy scale from the type-II widths of the largest model
+        (:func:`calibration.scale_fit.width_scale`): the scale of the structure this
+        receiver has, shared by its five parameters.
     """
 
     constant_sd_k: float = 3000.0
@@ -153,6 +157,7 @@ class ShrinkagePrior:
     scale_per_parameter: bool = True
     scale_hyperprior_k: float | None = None
     width_hyperprior_k: float | None = None
+    width_scale_from_data: bool = True
 
     def __post_init__(self) -> None:
         if not (0 < self.tau_min_k < self.tau_max_k and self.constant_sd_k > 0):
