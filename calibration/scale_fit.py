@@ -80,6 +80,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import brentq
 
 from .conjugate import ScalePrior, stacked_log_evidence
 from .errors import IllPosedError
@@ -212,11 +213,14 @@ def width_scale(widths: ParameterScales, prior: ShrinkagePrior) -> float | None:
     if tau.size == 0:
         return None
     lo, hi = float(np.log(tau.min())), float(np.log(tau.max()))
-    for _ in range(60):  # bisection in log s: the sum falls as s grows
-        mid = 0.5 * (lo + hi)
-        r2 = (tau / np.exp(mid)) ** 2
-        lo, hi = (mid, hi) if np.sum((r2 - 1.0) / (r2 + 1.0)) > 0 else (lo, mid)
-    return float(np.exp(0.5 * (lo + hi)))
+    if lo == hi:
+        return float(tau[0])
+
+    def score(log_s: float) -> float:  # falls as s grows: positive at lo, negative at hi
+        r2 = (tau / np.exp(log_s)) ** 2
+        return float(np.sum((r2 - 1.0) / (r2 + 1.0)))
+
+    return float(np.exp(brentq(score, lo, hi, xtol=1e-12)))
 
 
 def fit_largest(
