@@ -190,8 +190,9 @@ def _fit_shrinkage(
 ) -> tuple[Deferred, dict[Orders, float]]:
     """:func:`fit` with the prior scale marginalised (or fitted per parameter), averaged.
 
-    With widths fitted per parameter (:func:`~calibration.scale_fit.fit_scales`), the
-    search runs twice: under the widths fitted at the largest model, then from its best
+    With widths fitted per parameter (:func:`~calibration.scale_fit.fit_largest`, whose
+    prior, with its widths' scale set by the data, every later fit shares), the search
+    runs twice: under the widths fitted at the largest model, then from its best
     under the widths refitted at that best; the second table is the one returned, and
     the smooth-function hypothesis keeps the first widths
     (:func:`_hypotheses_with_own_widths`).
@@ -200,7 +201,7 @@ def _fit_shrinkage(
     widths: ShrinkagePrior | ParameterScales = prior
     smooth_widths: ParameterScales | None = None  # set where the polynomials' are refitted
     if prior.per_parameter:
-        widths, prior = fit_largest(normal, prior, scale_prior)
+        widths, prior = fit_largest(normal, prior, scale_prior)  # prior: with that scale
 
     batch = None if prior.per_parameter else EvidenceGrid(normal, prior, scale_prior)
 
@@ -299,7 +300,7 @@ def _hypotheses_with_own_widths(
     The polynomials under the widths refitted at their evidence-best model (the first of
     ``widths``; ``grids`` holds their evidences), every model of the box (``n_models``)
     equally likely; the smooth functions, ``full``, under the widths fitted at the largest
-    model (the second), which is type-II maximum likelihood under that hypothesis. Prior
+    model (the second), their own fit under that hypothesis. Prior
     odds ``SMOOTH_SHARE : 1 - SMOOTH_SHARE`` between the two.
     """
     polynomials = {m: np.asarray(g) - np.log(n_models) for m, g in grids.items()}

@@ -48,7 +48,7 @@ match a quadrature (a test).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -159,9 +159,10 @@ LogPrior = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
 
 def scale_log_prior(prior: ShrinkagePrior) -> LogPrior:
     """The hyperprior of the five scales (``prior.scale_hyperprior_k``), independent."""
+    s = prior.scale_hyperprior_k
 
     def log_prior(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return np.sum(log_scale_density(x, prior), axis=1), log_scale_density_gradient(x, prior)
+        return np.sum(log_scale_density(x, prior, s), axis=1), log_scale_density_gradient(x, s)
 
     return log_prior
 
@@ -172,14 +173,14 @@ def width_log_prior(prior: ShrinkagePrior, orders: Orders) -> LogPrior | None:
     Only the parameters with higher terms in ``orders``: the others' ``tau_k`` is not in
     the model, and the prior alone would move it. ``None`` where the widths have none.
     """
-    if prior.width_hyperprior_k is None:
+    s = prior.width_hyperprior_k
+    if s is None:
         return None
-    widths = replace(prior, scale_hyperprior_k=prior.width_hyperprior_k)
     structured = np.array([n > 1 for n in orders])
 
     def log_prior(x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        value = np.sum(log_scale_density(x, widths)[:, structured], axis=1)
-        return value, log_scale_density_gradient(x, widths) * structured
+        value = np.sum(log_scale_density(x, prior, s)[:, structured], axis=1)
+        return value, log_scale_density_gradient(x, s) * structured
 
     return log_prior
 
@@ -351,7 +352,7 @@ def draw_scales(
         except IllPosedError:
             continue
         posteriors.extend(posts)
-        log_p = np.sum(log_scale_density(x, prior), axis=1)
+        log_p = np.sum(log_scale_density(x, prior, prior.scale_hyperprior_k), axis=1)
         log_weights.append(log_z + log_p + log_prior - log_q - np.log(len(x)))
     if not posteriors:
         return None

@@ -185,7 +185,7 @@ class ShrinkagePrior:
         equally likely. The grid is even in ``log tau``, so a point's mass is the density
         of ``log tau`` there, normalised over the grid.
         """
-        density = log_scale_density(np.log(self.scales_k), self)
+        density = log_scale_density(np.log(self.scales_k), self, self.scale_hyperprior_k)
         mass = np.exp(density - np.max(density))
         return np.tile(np.log(self.n_scales * mass / mass.sum()), len(self.decays))
 
@@ -386,25 +386,27 @@ def _higher_terms(
     )
 
 
-def log_scale_density(log_tau: FloatArray, prior: ShrinkagePrior) -> FloatArray:
-    """The log density of ``log tau`` under the prior's hyperprior, on its range.
+def log_scale_density(
+    log_tau: FloatArray, prior: ShrinkagePrior, s: float | None
+) -> FloatArray:
+    """The log density of ``log tau`` under a hyperprior on the prior's range.
 
-    Half-Cauchy ``p(tau) = 1 / (1 + (tau/s)^2)`` up to its normalisation
-    ``s (atan(tau_max/s) - atan(tau_min/s))``, times the Jacobian ``tau`` of ``log tau``;
-    uniform in ``log tau`` where ``scale_hyperprior_k`` is ``None``.
+    Half-Cauchy of scale ``s`` (K), ``p(tau) = 1 / (1 + (tau/s)^2)`` up to its
+    normalisation ``s (atan(tau_max/s) - atan(tau_min/s))``, times the Jacobian ``tau`` of
+    ``log tau``; uniform in ``log tau`` where ``s`` is ``None``. ``s`` is
+    ``prior.scale_hyperprior_k`` for the marginalised scales, ``width_hyperprior_k`` for
+    the fitted ones.
     """
     log_tau = np.asarray(log_tau, dtype=float)
-    s = prior.scale_hyperprior_k
     if s is None:
         return np.full(log_tau.shape, -np.log(np.log(prior.tau_max_k / prior.tau_min_k)))
     mass = s * (np.arctan(prior.tau_max_k / s) - np.arctan(prior.tau_min_k / s))
     return log_tau - np.log1p(np.exp(2.0 * log_tau) / s**2) - np.log(mass)
 
 
-def log_scale_density_gradient(log_tau: FloatArray, prior: ShrinkagePrior) -> FloatArray:
+def log_scale_density_gradient(log_tau: FloatArray, s: float | None) -> FloatArray:
     """The derivative of :func:`log_scale_density` in ``log tau``."""
     log_tau = np.asarray(log_tau, dtype=float)
-    s = prior.scale_hyperprior_k
     if s is None:
         return np.zeros(log_tau.shape)
     r2 = np.exp(2.0 * log_tau) / s**2

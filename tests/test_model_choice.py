@@ -298,8 +298,8 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
     two binomial sigma of the correlated channels. Here, with a prior scale per parameter
     (the default), the best model covers 59/90 % and the average 65/94 % (with type-II
     widths 61/90 % and 65/95 %; with the widths fitted at the largest model alone 61/89 %
-    and 66/94 %; the polynomials under
-    widths refitted at their best, the smooth hypothesis too, 63/93 %; under one shared
+    and 66/94 %; the polynomials under widths refitted at their best, the smooth
+    hypothesis too, 63/93 %; under one shared
     scale 59/88 % and 63/93 %; with the term sizes in the prior's shrunk sd, as the
     benchmark once drew them, the truths were weaker and the average covered 66/90 %).
     """
@@ -363,7 +363,7 @@ def test_the_grid_weights_are_the_scale_density(normal):
     prior = ShrinkagePrior(scale_hyperprior_k=10.0)
     mass = np.exp(prior.log_grid_weights).reshape(len(prior.decays), prior.n_scales)
     np.testing.assert_allclose(mass.sum(axis=1), prior.n_scales)
-    density = np.exp(log_scale_density(np.log(prior.scales_k), prior))
+    density = np.exp(log_scale_density(np.log(prior.scales_k), prior, prior.scale_hyperprior_k))
     np.testing.assert_allclose(mass[0] / mass[0].sum(), density / density.sum(), rtol=1e-12)
     assert np.argmax(density) == np.argmin(np.abs(prior.scales_k - 10.0))  # the mode at s
     np.testing.assert_array_equal(ShrinkagePrior().log_grid_weights, 0.0)
@@ -398,7 +398,7 @@ def test_the_drawn_scales_integrate_the_evidence_as_a_grid_does(normal, orders):
     log_tau[:, free[0]], log_tau[:, free[1]] = a.ravel(), b.ravel()
     # The trapezoid rule in log tau, each node with tau's prior density there.
     trapezoid = np.r_[0.5, np.ones(58), 0.5] * (axis[1] - axis[0])
-    along = np.log(trapezoid) + log_scale_density(axis, prior)
+    along = np.log(trapezoid) + log_scale_density(axis, prior, prior.scale_hyperprior_k)
     log_weights = along[:, None] + along[None, :]
     per_decay = []
     for decay in prior.decays:

@@ -266,8 +266,8 @@ def test_a_parameter_without_structure_keeps_a_width_the_data_can_test(seed):
 
 def test_the_width_scale_is_the_half_cauchy_maximum_likelihood():
     """Two widths give their geometric mean; more, the root of the score equation (checked
-    against a direct maximisation of the half-Cauchy log likelihood); widths on the floor
-    are left out, and with every width there, there is no scale."""
+    against a direct maximisation of the half-Cauchy log likelihood); one, itself; widths
+    on the floor are left out, and with every width there, there is no scale."""
     prior = ShrinkagePrior()
 
     def scales(*tau):
@@ -276,6 +276,7 @@ def test_the_width_scale_is_the_half_cauchy_maximum_likelihood():
     floor = prior.tau_min_k
     assert width_scale(scales(0.1, 10.0, floor, floor, floor), prior) == pytest.approx(1.0)
     assert width_scale(scales(floor, floor, floor, floor, floor), prior) is None
+    assert width_scale(scales(floor, 0.3, floor, floor, floor), prior) == pytest.approx(0.3)
     tau = np.array([0.03, 0.4, 2.0, 7.0, 30.0])
 
     def negative_log_likelihood(log_s):
