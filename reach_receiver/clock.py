@@ -14,6 +14,45 @@ import time
 from typing import Protocol
 
 
+class StopEvent(threading.Event):
+    """A :class:`threading.Event` that a signal handler may set: its lock is reentrant.
+
+    Python runs a signal handler in the main thread between two bytecodes, possibly while
+    that thread holds the lock of the very event the handler sets (entering or leaving
+    ``wait``). ``threading.Event``'s lock is not reentrant, so its ``set`` then waits for
+    ever on the thread it interrupted (a daemon stopped by SIGTERM hung so in a test).
+    Here the handler re-enters the lock it already holds, sets the flag and returns; a
+    ``wait`` it interrupted sees the flag when its time is up, or at once.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._signal_safe = threading.Condition(threading.RLock())
+        self._set = False
+
+    def is_set(self) -> bool:
+        """Whether the event is set."""
+        return self._set
+
+    def set(self) -> None:
+        """Set the event and wake every waiter."""
+        with self._signal_safe:
+            self._set = True
+            self._signal_safe.notify_all()
+
+    def clear(self) -> None:
+        """Clear the event."""
+        with self._signal_safe:
+            self._set = False
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait up to ``timeout`` seconds (``None``: for ever); whether it is set."""
+        with self._signal_safe:
+            if not self._set:
+                self._signal_safe.wait(timeout)
+            return self._set
+
+
 class Clock(Protocol):
     """What a clock offers: the current time and a way to wait."""
 

@@ -254,3 +254,37 @@ def test_a_hang_up_of_the_whole_process_group_with_sim_ends_safe(files, tmp_path
     (event,) = [m for m in contents.of_kind("event") if m.name == "interrupted"]
     pins = dict(re.findall(r"(\w+)=(\w+)", event.attrs["message"]))
     assert not _unsafe(pins), event.attrs["message"]
+
+
+_HANDLER_STRIKES_IN_WAIT = """
+import os, signal, threading
+from reach_receiver.clock import StopEvent
+event = {kind}()
+# The lock wait() holds while it checks and re-checks the flag (private: this is where a
+# signal handler can strike in the thread it interrupts).
+lock = event._signal_safe if isinstance(event, StopEvent) else event._cond
+signal.signal(signal.SIGUSR1, lambda *_: event.set())
+with lock:
+    os.kill(os.getpid(), signal.SIGUSR1)
+    for _ in range(1000):  # bytecode boundaries, where the handler runs
+        pass
+print(event.wait(0.0))
+"""
+
+
+@pytest.mark.parametrize(("kind", "hangs"), [("threading.Event", True), ("StopEvent", False)])
+def test_a_signal_handler_sets_the_stop_event_its_thread_is_waiting_on(kind, hangs):
+    """reachd once hung for good on SIGTERM: the handler set the halt event while the main
+    thread, interrupted inside its wait, held the event's lock. A threading.Event's set()
+    then waits for ever (the check that this test can fail); a StopEvent is set at once."""
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", _HANDLER_STRIKES_IN_WAIT.format(kind=kind)],
+            capture_output=True, text=True, timeout=3.0,
+        )
+    except subprocess.TimeoutExpired:
+        assert hangs, f"{kind}: set() from the handler hung"
+        return
+    assert not hangs, f"{kind} did not hang: {done.stdout} {done.stderr}"
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"

@@ -32,7 +32,7 @@ from __future__ import annotations
 import threading
 import time
 
-from reach_receiver.clock import Clock
+from reach_receiver.clock import Clock, StopEvent
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor import Monitor
@@ -115,7 +115,7 @@ class Daemon(ControlRequests):
         self._worker = None
         self._finished = None
         self._loop = threading.RLock()
-        self._halt = threading.Event()
+        self._halt = StopEvent()  # set from the signal handler
         self._halt_reason = ""
         self._retry_at = None
         self._retries = 0

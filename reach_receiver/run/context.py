@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from calibration.solvers import AnySolution
-from reach_receiver.clock import Clock
+from reach_receiver.clock import Clock, StopEvent
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.devices.vna_settings import SweepSettings
 from reach_receiver.errors import ReceiverError
@@ -67,9 +67,9 @@ class StopToken:
     """A thread-safe request to stop, with its reason; the first reason wins."""
 
     def __init__(self) -> None:
-        self._event = threading.Event()
+        self._event = StopEvent()  # set from signal handlers
         self._reason = ""
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # a handler may interrupt a request in progress
 
     @property
     def event(self) -> threading.Event:
