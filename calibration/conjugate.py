@@ -26,7 +26,8 @@ and with known ``s^2 = 1``: ``... - 1/2 Q_min - 1/2 log|Lambda| - 1/2 log|V_0|``
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import suppress
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,6 +68,42 @@ class CoefficientPrior:
             means.append(np.concatenate([given, np.zeros(n - given.size)]))
             variances.append(np.full(n, sds[k] ** 2))
         return np.concatenate(means), np.concatenate(variances)
+
+
+@dataclass(frozen=True)
+class TermPrior(CoefficientPrior):
+    """A prior term by term: what is known beforehand of the size of a receiver's structure.
+
+    ``term_sd_k[name]`` gives the sd (K) of that parameter's Legendre terms 1, 2, ... (the
+    last repeats to higher orders); levels and parameters not named keep ``sd_k``. Zero
+    prior means. Under it the orders are not climbed but every model of the search's box
+    is scored, all equally likely, and averaged (:func:`calibration.model_fit.fit`): the
+    posterior of a receiver whose term sizes (from an earlier season, or a simulation's
+    own ensemble, ``benchmarks/model_choice.py``) and possible orders are known.
+    """
+
+    term_sd_k: Mapping[str, Sequence[float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.mean_k:
+            raise ValueError("a TermPrior has zero prior means")
+        for name, sds in self.term_sd_k.items():
+            if name not in PARAMETERS:
+                raise ValueError(f"unknown parameter {name!r} (one of {', '.join(PARAMETERS)})")
+            if len(sds) == 0 or any(not sd > 0 for sd in sds):
+                raise ValueError(f"the term widths of {name} must be positive, at least one")
+
+    def vectors(self, orders: Sequence[int]) -> tuple[FloatArray, FloatArray]:
+        """Prior mean (zero) and variance of every coefficient of ``orders``."""
+        means, variances = super().vectors(orders)
+        start = 0
+        for name, n in zip(PARAMETERS, orders, strict=True):
+            given = np.asarray(self.term_sd_k.get(name, ()), dtype=float)
+            if given.size and n > 1:
+                terms = given[np.minimum(np.arange(n - 1), given.size - 1)]
+                variances[start + 1 : start + n] = terms**2
+            start += n
+        return means, variances
 
 
 @dataclass(frozen=True)
@@ -201,6 +238,34 @@ def stacked_log_evidence(
     means = np.linalg.solve(scaled, (rhs / jacobi)[:, :, None])[:, :, 0] / jacobi
     q_min = _chi2(normal, idx, means) + np.sum(means**2 / prior_vars, axis=1)
     return log_evidence_from(normal, q_min, _occam(chol, jacobi, prior_vars), scale_prior)
+
+
+def models_log_evidence(
+    normal: NormalEquations,
+    models: Sequence[Orders],
+    variances: Callable[[Orders], FloatArray],
+    scale_prior: ScalePrior | None,
+) -> FloatArray:
+    """Log evidence of each of ``models`` (``-inf`` where ill-posed), zero prior mean.
+
+    ``variances(orders)`` gives a model's prior variances, shape ``(1, P)``. Models with
+    the same number of coefficients share one stacked factorisation
+    (:func:`stacked_log_evidence`); a group with an ill-posed model is scored one by one.
+    """
+    out = np.full(len(models), -np.inf)
+    groups: dict[int, list[int]] = {}
+    for i, orders in enumerate(models):
+        groups.setdefault(sum(orders), []).append(i)
+    for members in groups.values():
+        idx = np.stack([normal.indices(models[i]) for i in members])
+        var = np.concatenate([variances(models[i]) for i in members])
+        try:
+            out[members] = stacked_log_evidence(normal, idx, var, scale_prior)
+        except LinAlgError:
+            for i, row, v in zip(members, idx, var, strict=True):
+                with suppress(LinAlgError):
+                    out[i] = stacked_log_evidence(normal, row[None], v[None], scale_prior)[0]
+    return out
 
 
 def log_evidence_from(

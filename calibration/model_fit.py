@@ -3,7 +3,9 @@
 Shared by the thesis solver and the radiometric solver: they differ only in how they build
 the :class:`~calibration.normal_equations.NormalEquations` (likelihood) and in their
 priors. With a fixed :class:`~calibration.conjugate.CoefficientPrior` (the thesis's), one
-model is chosen by a climb over orders; with a
+model is chosen by a climb over orders; with a :class:`~calibration.conjugate.TermPrior`
+(term sizes known beforehand), every model between the order limits is scored and
+averaged; with a
 :class:`~calibration.shrinkage.ShrinkagePrior` (the radiometric solver's default), the
 prior's scales are set by the data, one per parameter (:mod:`calibration.scale_fit`:
 at the largest model, then refitted at the first search's best for a second; or one
@@ -20,6 +22,7 @@ scale also the smooth functions under a scale per parameter marginalised,
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -33,7 +36,14 @@ from .averaging import (
     select_components,
     with_smooth_hypothesis,
 )
-from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior, solve
+from .conjugate import (
+    CoefficientPrior,
+    LinearPosterior,
+    ScalePrior,
+    TermPrior,
+    models_log_evidence,
+    solve,
+)
 from .errors import IllPosedError
 from .normal_equations import NormalEquations
 from .order_search import search_orders, search_orders_jointly
@@ -110,7 +120,9 @@ def fit(
     NIG prior's coefficient covariance is ``s^2 V_0``). Fixed orders that the data leave
     unconstrained raise :class:`IllPosedError` unless ``allow_prior_dominated``. With a
     :class:`ShrinkagePrior`, ``average`` mixes the models that carry the weight; without
-    it, only the best model's prior scales. Models the search had to pass over (no
+    it, only the best model's prior scales; with a :class:`~calibration.conjugate.TermPrior`,
+    every model of the box is scored, all equally likely, and mixed (or the best kept).
+    Models the search had to pass over (no
     finite evidence) are recorded in ``skipped`` with the reason, and do not stop it.
     ``smooth`` offers the averaged search the smooth-function hypothesis
     (:func:`~calibration.averaging.with_smooth_hypothesis`) when the data constrain it.
@@ -146,6 +158,11 @@ def _fit(
             smooth,
         )
 
+    if isinstance(prior, TermPrior) and choice.orders is None:
+        return _fit_every_model(
+            normal, choice, prior, prior_variance_scale, scale_prior, average, skipped
+        )
+
     def posterior(orders: Orders) -> LinearPosterior:
         mean, var = prior.vectors(orders)
         return solve(normal, orders, mean, var / prior_variance_scale, scale_prior)
@@ -175,6 +192,59 @@ def _fit(
     if not np.isfinite(result.log_evidence):
         raise IllPosedError("no model between the order limits is constrained by the data")
     return (lambda: posterior(result.best)), result.table
+
+
+#: The most models :func:`_fit_every_model` scores: the default search box, 8^5.
+MAX_MODELS = 8**5
+
+
+@dataclass(frozen=True)
+class _FixedWidths:
+    """A fixed prior's variances in ``V_0`` units, in the shape the mixture takes."""
+
+    prior: CoefficientPrior
+    variance_scale: float
+
+    def variances(self, orders: Sequence[int]) -> np.ndarray:
+        return self.prior.vectors(orders)[1][None, :] / self.variance_scale
+
+
+def _fit_every_model(
+    normal: NormalEquations,
+    choice: OrderChoice,
+    prior: TermPrior,
+    variance_scale: float,
+    scale_prior: ScalePrior | None,
+    average: bool,
+    skipped: dict[Orders, str],
+) -> tuple[Deferred, dict[Orders, float]]:
+    """Every model between the order limits scored, all equally likely, and averaged.
+
+    The posterior is the evidence-weighted mixture (:mod:`calibration.averaging`) of the
+    models that carry the weight, or the best one alone without ``average``.
+    """
+    limits = zip(choice.min_orders, choice.max_orders, strict=True)
+    models = [as_orders(m) for m in itertools.product(*(range(lo, hi + 1) for lo, hi in limits))]
+    if len(models) > MAX_MODELS:
+        raise ValueError(f"{len(models)} models between the order limits: at most {MAX_MODELS}")
+    widths = _FixedWidths(prior, variance_scale)
+    logs = models_log_evidence(normal, models, widths.variances, scale_prior)
+    table = {m: float(z) for m, z in zip(models, logs, strict=True)}
+    pool = {m: np.array([z]) for m, z in table.items() if np.isfinite(z)}
+    reason = "the data and prior give it no finite evidence"
+    skipped.update({m: reason for m in table if m not in pool})
+    if not pool:
+        raise IllPosedError("no model between the order limits is constrained by the data")
+    best = max(pool, key=table.__getitem__)
+
+    def posterior() -> LinearPosterior:
+        if not average:
+            variances = widths.variances(best)[0]
+            return solve(normal, best, np.zeros_like(variances), variances, scale_prior)
+        components = select_components(pool)
+        return mixture_posterior(normal, components, widths, scale_prior, table[best])
+
+    return posterior, table
 
 
 def _fit_shrinkage(

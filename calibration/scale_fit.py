@@ -75,14 +75,13 @@ smooth one (1.02-1.05, 1.16-1.17, 1.11-1.12, at 1.5-3 times the solve's time).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from contextlib import suppress
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
-from .conjugate import ScalePrior, stacked_log_evidence
+from .conjugate import ScalePrior, models_log_evidence
 from .errors import IllPosedError
 from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
@@ -122,24 +121,10 @@ class ParameterScales:
         """Log evidence of each model under these widths (``-inf`` where ill-posed).
 
         The evidence of :func:`calibration.conjugate.solve` (eq. 3.35, zero prior mean),
-        without the posterior's covariance: models with the same number of coefficients
-        share one stacked factorisation
-        (:func:`~calibration.conjugate.stacked_log_evidence`).
+        without the posterior's covariance, batched by
+        :func:`~calibration.conjugate.models_log_evidence`.
         """
-        out = np.full(len(models), -np.inf)
-        groups: dict[int, list[int]] = {}
-        for i, orders in enumerate(models):
-            groups.setdefault(sum(orders), []).append(i)
-        for members in groups.values():
-            idx = np.stack([normal.indices(models[i]) for i in members])
-            var = np.concatenate([self.variances(models[i]) for i in members])
-            try:
-                out[members] = stacked_log_evidence(normal, idx, var, scale_prior)
-            except np.linalg.LinAlgError:  # one ill-posed model: score the group one by one
-                for i, row, v in zip(members, idx, var, strict=True):
-                    with suppress(np.linalg.LinAlgError):
-                        out[i] = stacked_log_evidence(normal, row[None], v[None], scale_prior)[0]
-        return out
+        return models_log_evidence(normal, models, self.variances, scale_prior)
 
 
 def fit_scales(
