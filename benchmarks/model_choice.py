@@ -13,7 +13,13 @@ solves the same runs:
 * ``shrink 6``: no choice of orders: six terms of every parameter under the hierarchical
   prior, its scales marginalised (continuous shrinkage in place of dropping terms);
 * ``true orders``: the truth's orders fixed, with the fixed wide prior (an oracle: unbiased,
-  at the floor, its error bars exact).
+  at the floor, its error bars exact);
+* ``own prior`` (random truths only): the ensemble's own prior, another oracle, which
+  knows how the truths are drawn: every order combination of 1-6 terms equally likely,
+  each higher term Gaussian with the sd of the drawn sizes
+  (:class:`~calibration.conjugate.TermPrior`, every model scored and averaged). What a
+  method that knew the ensemble could reach on the same runs: a bound the default cannot
+  beat on average, and one its own noise may put above the issue's.
 
 Per method: the median and the RMS over runs of (RMS calibration error of the noiseless
 validation source) / (Cramer-Rao floor at the true orders); the RMS over runs of
@@ -38,7 +44,7 @@ from functools import partial
 
 import numpy as np
 
-from calibration.conjugate import CoefficientPrior
+from calibration.conjugate import CoefficientPrior, TermPrior
 from calibration.data import CalibrationData
 from calibration.errors import IllPosedError
 from calibration.model_fit import OrderChoice
@@ -61,6 +67,10 @@ WIDTH = ITPM_CHANNEL_WIDTH_HZ * 8  # 820 channels: the same physics, faster runs
 Truth = dict[str, list[float]]
 #: Terms of a "smooth" truth (constant included): beyond any order the search reaches.
 SMOOTH_TERMS = 12
+#: A random truth has 1 to this many terms per parameter...
+MAX_TERMS = 6
+#: ...each higher term log-uniformly this many times the data's own posterior sd.
+Z_RANGE = (0.3, 30.0)
 
 
 def _old(data: CalibrationData) -> Solution:
@@ -111,7 +121,7 @@ ENSEMBLES = (
 )
 
 
-def pilot_sd(ensemble: Ensemble, orders: int = 6) -> dict[str, np.ndarray]:
+def pilot_sd(ensemble: Ensemble, orders: int = MAX_TERMS) -> dict[str, np.ndarray]:
     """Posterior sd of every term at ``orders`` terms (fewer where the data cannot say).
 
     Under the fixed wide prior, so that the sd is the data's own (what a term's
@@ -154,8 +164,9 @@ def draw_truth(
         if ensemble.truths == "weak":
             n, z = 3, np.array([30.0, rng.uniform(2.0, 6.0)])
         else:
-            n = int(rng.integers(1, 7))
-            z = np.exp(rng.uniform(np.log(0.3), np.log(30.0), size=n - 1))
+            n = int(rng.integers(1, MAX_TERMS + 1))
+            lo, hi = np.log(Z_RANGE)
+            z = np.exp(rng.uniform(lo, hi, size=n - 1))
         signs = rng.choice([-1.0, 1.0], size=n - 1)
         truth[k] = [level, *(signs * z * sd[k][1:n])]
     return truth
@@ -196,10 +207,26 @@ class Tally:
         )
 
 
+def own_prior(sd: dict[str, np.ndarray]) -> Solver:
+    """The random truths' own prior (module docstring): the oracle ``own prior``.
+
+    A size ``z sd`` with ``log z`` uniform on :data:`Z_RANGE` has the mean square
+    ``sd^2 (hi^2 - lo^2) / (2 log(hi / lo))``; the Gaussian of that variance stands for it.
+    """
+    lo, hi = Z_RANGE
+    z_rms = np.sqrt((hi**2 - lo**2) / (2.0 * np.log(hi / lo)))
+    prior = TermPrior(term_sd_k={k: list(z_rms * v[1:MAX_TERMS]) for k, v in sd.items()})
+    box = OrderChoice(max_orders=(MAX_TERMS,) * 5, ceiling=MAX_TERMS)
+    return partial(solve_radiometric, orders=box, prior=RadiometricPrior(coefficients=prior))
+
+
 def run_ensemble(ensemble: Ensemble, runs: int, seed: int = 0) -> dict[str, Tally]:
     """Every method on ``runs`` seeded runs of ``ensemble``."""
     sd = pilot_sd(ensemble)
-    tallies = {name: Tally() for name in [*METHODS, "true orders"]}
+    methods = dict(METHODS)
+    if ensemble.truths == "random":
+        methods["own prior"] = own_prior(sd)
+    tallies = {name: Tally() for name in [*methods, "true orders"]}
     rng = np.random.default_rng(seed)
     for _ in range(runs):
         truth = draw_truth(ensemble, sd, rng)
@@ -214,7 +241,7 @@ def run_ensemble(ensemble: Ensemble, runs: int, seed: int = 0) -> dict[str, Tall
             solve_radiometric, orders=OrderChoice.fixed(run.truth.parameters.orders),
             prior=RadiometricPrior(coefficients=CoefficientPrior()),
         )
-        solvers: dict[str, Solver] = {**METHODS, "true orders": oracle}
+        solvers: dict[str, Solver] = {**methods, "true orders": oracle}
         for name, solver in solvers.items():
             try:
                 calibrated = solver(data).calibrate(
