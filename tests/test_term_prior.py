@@ -73,6 +73,8 @@ def test_every_model_of_the_box_is_scored_and_weighed_by_its_evidence():
         )
     best, _ = fit(normal, OrderChoice(max_orders=largest), prior, 1.0, scale, average=False)
     assert best.orders == first
+    with pytest.raises(ValueError, match="59049 models between the order limits: at most 32768"):
+        fit(normal, OrderChoice(max_orders=(9,) * 5), prior, 1.0, scale)  # refused before scoring
 
 
 def test_truths_drawn_from_the_prior_are_covered_at_the_nominal_rate():
