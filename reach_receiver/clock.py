@@ -13,6 +13,9 @@ import threading
 import time
 from typing import Protocol
 
+#: The longest a :class:`StopEvent`'s ``wait`` sleeps before it looks at the flag again.
+WAIT_SLICE_S = 0.25
+
 
 class StopEvent(threading.Event):
     """A :class:`threading.Event` that a signal handler may set: its lock is reentrant.
@@ -21,8 +24,10 @@ class StopEvent(threading.Event):
     that thread holds the lock of the very event the handler sets (entering or leaving
     ``wait``). ``threading.Event``'s lock is not reentrant, so its ``set`` then waits for
     ever on the thread it interrupted (a daemon stopped by SIGTERM hung so in a test).
-    Here the handler re-enters the lock it already holds, sets the flag and returns; a
-    ``wait`` it interrupted sees the flag when its time is up, or at once.
+    Here the handler re-enters the lock it already holds, sets the flag and returns. A
+    handler that strikes inside ``wait`` after the flag was checked but before the waiter
+    registered notifies no one; ``wait`` therefore sleeps in slices of
+    :data:`WAIT_SLICE_S` and re-checks the flag, so that it sees it within one slice.
     """
 
     def __init__(self) -> None:
@@ -47,9 +52,13 @@ class StopEvent(threading.Event):
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait up to ``timeout`` seconds (``None``: for ever); whether it is set."""
+        deadline = None if timeout is None else time.monotonic() + timeout
         with self._signal_safe:
-            if not self._set:
-                self._signal_safe.wait(timeout)
+            while not self._set:
+                left = WAIT_SLICE_S if deadline is None else deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self._signal_safe.wait(min(left, WAIT_SLICE_S))
             return self._set
 
 

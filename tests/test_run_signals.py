@@ -13,12 +13,14 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import pytest
 
 from reach_receiver.cli import run_main
+from reach_receiver.clock import WAIT_SLICE_S, StopEvent
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
 from reach_receiver.store import RUN_FILE, read_run_file
 from reach_receiver.store.parts import PartInfo, list_parts
@@ -288,3 +290,25 @@ def test_a_signal_handler_sets_the_stop_event_its_thread_is_waiting_on(kind, han
     assert not hangs, f"{kind} did not hang: {done.stdout} {done.stderr}"
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "True"
+
+
+def test_a_stop_event_set_without_a_notify_is_seen_within_a_slice():
+    """A handler that strikes between wait()'s check of the flag and its registering as a
+    waiter sets the flag with no one to notify. The state that leaves (the flag set, the
+    waiter not woken) is made here directly: the wait must see it within one slice, not
+    at the end of its 30 s."""
+    event = StopEvent()
+    seen: list[float] = []
+
+    def wait() -> None:
+        if event.wait(30.0):
+            seen.append(time.monotonic())
+
+    waiter = threading.Thread(target=wait)
+    waiter.start()
+    time.sleep(0.1)  # the waiter is asleep in the condition
+    set_at = time.monotonic()
+    event._set = True  # private: the flag as a handler leaves it when its notify found no one
+    waiter.join(timeout=5.0)
+    assert not waiter.is_alive(), "the wait did not see the flag"
+    assert seen[0] - set_at <= WAIT_SLICE_S + 0.5
