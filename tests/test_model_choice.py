@@ -195,10 +195,13 @@ def test_the_mixture_has_the_moments_of_its_components_and_samples_them():
     assert np.isclose(post.weights.sum(), 1.0)
     size = post.mean.size
     mean, second = np.zeros(size), np.zeros((size, size))
-    for component, weight in zip(post.components, post.weights, strict=True):
+    means = np.zeros((len(post.components), size))
+    variances = np.zeros_like(means)
+    for i, (component, weight) in enumerate(zip(post.components, post.weights, strict=True)):
         idx = full_indices(component.orders, post.orders)
         m = np.zeros(size)
         m[idx] = component.mean
+        means[i], variances[i, idx] = m, np.diag(component.covariance)
         mean += weight * m
         second += weight * np.outer(m, m)
         second[np.ix_(idx, idx)] += weight * component.covariance
@@ -207,8 +210,12 @@ def test_the_mixture_has_the_moments_of_its_components_and_samples_them():
     draws = post.sample(200_000, np.random.default_rng(0))
     sd = np.sqrt(np.diag(post.covariance))
     assert np.all(np.abs(draws.mean(axis=0) - post.mean) <= 4 * sd / np.sqrt(len(draws)) + 1e-12)
-    # a term only the lighter models have is a rare, heavy tail: 10 % on its spread
-    np.testing.assert_allclose(draws.std(axis=0), sd, rtol=0.10, atol=1e-12)
+    # A term only a light model has is a rare, heavy tail: its sample sd is as noisy as the
+    # mixture's fourth central moment makes it, sd(s) ~ sqrt((m4 - var^2) / n) / (2 sd).
+    d = means - post.mean
+    m4 = post.weights @ (d**4 + 6.0 * d**2 * variances + 3.0 * variances**2)
+    noise = np.sqrt(np.maximum(m4 - sd**4, 0.0) / len(draws)) / (2.0 * sd)
+    assert np.all(np.abs(draws.std(axis=0) - sd) <= 5.0 * noise + 1e-12)
     assert tuple(solution.metadata["best_orders"]) == solution.best_orders
     weights = [w["weight"] for w in solution.metadata["model_weights"]]
     assert weights == sorted(weights, reverse=True)
