@@ -271,6 +271,7 @@ def _fit_shrinkage(
     grids: dict[Orders, np.ndarray] = {}
     widths: ShrinkagePrior | ParameterScales = prior
     smooth_widths: ParameterScales | None = None  # set where the polynomials' are refitted
+    refitted_at: Orders = choice.max_orders  # ...at this model, their mode's
     if prior.per_parameter:
         widths, prior = fit_largest(normal, prior, scale_prior)  # prior: with that scale
 
@@ -311,7 +312,7 @@ def _fit_shrinkage(
     else:
         best, table = search(starts)
         if isinstance(widths, ParameterScales) and max(best) > 1 and np.isfinite(table[best]):
-            smooth_widths = widths
+            smooth_widths, refitted_at = widths, best
             widths = fit_scales(normal, prior, scale_prior, orders=best, start=widths)
             grids.clear()
             skipped.clear()
@@ -332,8 +333,8 @@ def _fit_shrinkage(
                 choice.min_orders, choice.max_orders, strict=True)]))
             if smooth_widths is not None:
                 assert isinstance(widths, ParameterScales)
-                occam = (
-                    log_occam(normal, best, widths, prior, scale_prior),
+                occam = (  # each about its widths' mode: where they were fitted
+                    log_occam(normal, refitted_at, widths, prior, scale_prior),
                     log_occam(normal, full, smooth_widths, prior, scale_prior),
                 )
                 return _hypotheses_with_own_widths(
@@ -370,7 +371,7 @@ def _hypotheses_with_own_widths(
     widths: tuple[ParameterScales, ParameterScales],
     scale_prior: ScalePrior | None,
     log_evidence: float,
-    log_occam: tuple[float, float] = (0.0, 0.0),
+    occam: tuple[float, float] = (0.0, 0.0),
 ) -> LinearPosterior:
     """The two hypotheses of :func:`with_smooth_hypothesis`, each under its own widths.
 
@@ -378,10 +379,10 @@ def _hypotheses_with_own_widths(
     ``widths``; ``grids`` holds their evidences), every model of the box (``n_models``)
     equally likely; the smooth functions, ``full``, under the widths fitted at the largest
     model (the second), their own fit under that hypothesis. Prior
-    odds ``SMOOTH_SHARE : 1 - SMOOTH_SHARE`` between the two. ``log_occam`` is what
+    odds ``SMOOTH_SHARE : 1 - SMOOTH_SHARE`` between the two. ``occam`` is what
     marginalising each hypothesis's widths adds to its evidence
-    (:func:`~calibration.scale_fit.log_occam`, at the polynomials' best model and at
-    ``full``).
+    (:func:`~calibration.scale_fit.log_occam`, at the model where the polynomials' widths
+    were refitted and at ``full``).
 
     Measured with and without it (README, "Model choice"): at the widths' modes alone the
     smooth functions, which fit their five widths to every term of the box, won runs of
@@ -390,7 +391,7 @@ def _hypotheses_with_own_widths(
     widths marginalised, 0.907 and 1.082.
     """
     polynomials = {
-        m: np.asarray(g) - np.log(n_models) + log_occam[0] for m, g in grids.items()
+        m: np.asarray(g) - np.log(n_models) + occam[0] for m, g in grids.items()
     }
     mixture = mixture_posterior(
         normal, select_components(polynomials), widths[0], scale_prior, log_evidence
@@ -400,7 +401,7 @@ def _hypotheses_with_own_widths(
     odds = float(np.log(SMOOTH_SHARE / (1.0 - SMOOTH_SHARE)))
     return join_hypotheses(
         mixture, pool_log_evidence(polynomials), [smooth],
-        np.array([smooth.log_evidence + odds + log_occam[1]]),
+        np.array([smooth.log_evidence + odds + occam[1]]),
     )
 
 
