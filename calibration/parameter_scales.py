@@ -275,6 +275,28 @@ def maximise_each(
     return [(row, float(z)) for row, z in zip(x, log_z, strict=True)]
 
 
+def negative_hessian(
+    normal: NormalEquations, orders: Orders, x: FloatArray, decay: float,
+    prior: ShrinkagePrior, scale_prior: ScalePrior | None, log_prior: LogPrior | None,
+    coordinates: Sequence[int] | NDArray[np.intp], step: float,
+) -> FloatArray:
+    """``-d^2 (log Z + log_prior) / d x_i d x_j`` at ``x`` over ``coordinates``, symmetric.
+
+    Central differences (step ``step`` in ``log tau``) of the analytic gradient
+    (:func:`evidence_gradient`), one batched solve. Raises :class:`IllPosedError` where a
+    shifted point leaves the model ill-posed.
+    """
+    index = np.asarray(coordinates, dtype=np.intp)
+    shifts = np.zeros((2 * index.size, x.size))
+    shifts[0::2, index] = step * np.eye(index.size)
+    shifts[1::2, index] = -step * np.eye(index.size)
+    _, grads = _log_posterior(
+        normal, orders, x[None, :] + shifts, decay, prior, scale_prior, log_prior
+    )
+    hessian = (grads[0::2, index] - grads[1::2, index]) / (2.0 * step)
+    return -0.5 * (hessian + hessian.T)
+
+
 def _mode(
     normal: NormalEquations, orders: Orders, decay: float, prior: ShrinkagePrior,
     scale_prior: ScalePrior | None, start: FloatArray, bounds: tuple[float, float],
@@ -285,13 +307,13 @@ def _mode(
     if found is None:
         return None
     x = found[0]
-    shifted = x[None, :] + STEP * np.vstack([np.zeros(x.size), np.eye(x.size)])
     try:
-        _, grads = _log_posterior(normal, orders, shifted, decay, prior, scale_prior, log_prior)
+        hessian = negative_hessian(
+            normal, orders, x, decay, prior, scale_prior, log_prior, range(x.size), STEP
+        )
     except IllPosedError:
         return None
-    hessian = -(grads[1:] - grads[0]) / STEP
-    return x, 0.5 * (hessian + hessian.T)
+    return x, hessian
 
 
 def _t_log_density(x: FloatArray, mean: FloatArray, chol: FloatArray, dof: float) -> FloatArray:

@@ -99,19 +99,14 @@ from .noise_waves import N_PARAMETERS
 from .normal_equations import NormalEquations
 from .parameter_scales import (
     BEHIND_NATS,
-    evidence_gradient,
     maximise,
     maximise_each,
+    negative_hessian,
     variances,
     width_log_prior,
 )
 from .polynomial_model import Orders, as_orders
-from .shrinkage import (
-    EvidenceGrid,
-    ShrinkagePrior,
-    log_scale_density,
-    log_scale_density_gradient,
-)
+from .shrinkage import EvidenceGrid, ShrinkagePrior, log_scale_density
 
 FloatArray = NDArray[np.float64]
 
@@ -264,7 +259,7 @@ def log_occam(
         log int Z p du  ~  log Z(u*) + log p(u*) + (d/2) log 2 pi - (1/2) log det(-H)
 
     with ``H`` the Hessian of ``log Z + log p`` at ``u*`` (central differences of the
-    analytic gradient, :func:`~calibration.parameter_scales.evidence_gradient`). Returned:
+    analytic gradient, :func:`~calibration.parameter_scales.negative_hessian`). Returned:
     all but ``log Z(u*)``. Widths that many terms pin down pay more than widths a few
     terms leave loose, so a hypothesis is no longer favoured for fitting more of them:
     the smooth functions fit five widths to 35 higher terms, a polynomial of the issue's
@@ -274,18 +269,14 @@ def log_occam(
     structured = np.flatnonzero([n > 1 for n in orders])
     if structured.size == 0:
         return 0.0
-    s = prior.width_hyperprior_k
     mode = np.log(np.asarray(widths.tau_k, dtype=float))
-    rows = np.repeat(mode[None, :], 2 * structured.size, axis=0)
-    for i, k in enumerate(structured):
-        rows[2 * i, k] += HESSIAN_STEP
-        rows[2 * i + 1, k] -= HESSIAN_STEP
-    _, _, grad = evidence_gradient(normal, orders, rows, widths.decay, prior, scale_prior)
-    grad = (grad + log_scale_density_gradient(rows, s))[:, structured]
-    hessian = (grad[0::2] - grad[1::2]) / (2.0 * HESSIAN_STEP)
-    curvature = np.linalg.eigvalsh(-0.5 * (hessian + hessian.T))
+    hessian = negative_hessian(
+        normal, orders, mode, widths.decay, prior, scale_prior,
+        width_log_prior(prior, orders), structured, HESSIAN_STEP,
+    )
+    curvature = np.linalg.eigvalsh(hessian)
     flat = 1.0 / np.log(prior.tau_max_k / prior.tau_min_k) ** 2
-    log_p = float(np.sum(log_scale_density(mode[structured], prior, s)))
+    log_p = float(np.sum(log_scale_density(mode[structured], prior, prior.width_hyperprior_k)))
     occam = (
         log_p + 0.5 * structured.size * np.log(2.0 * np.pi)
         - 0.5 * float(np.sum(np.log(np.maximum(curvature, flat))))
