@@ -18,16 +18,19 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from functools import cache, partial
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from .averaging import MixturePosterior
 from .basis import PolynomialBasis
 from .conjugate import LinearPosterior
 from .data import SourceData, check_source
 from .errors import InvalidDataError
+from .mixture_interval import ChannelMixture, central_interval, channel_mixture
 from .noise_waves import INDEX, PARAMETERS, design_terms
 from .polynomial_model import Orders, PolynomialParameters, coefficient_slices, design_rows
 from .reflection_noise import reflection_variance
@@ -50,6 +53,9 @@ class CalibratedSpectrum:
     ``(K, n_channels)`` of the VNA's data-sheet error on this spectrum
     (:mod:`calibration.vna_systematics`): deviations from this spectrum, correlated
     across channels, part of every interval and sample, their RMS ``std_systematic``.
+    ``mixture``, for a model-averaged solution, gives the calibration error's components
+    per channel (:mod:`calibration.mixture_interval`), so that intervals are the
+    mixture's quantiles; computed when an interval is asked for.
     """
 
     freq_hz: FloatArray
@@ -60,6 +66,7 @@ class CalibratedSpectrum:
     rows: FloatArray = field(repr=False)
     draw_calibration: Callable[[int, np.random.Generator], FloatArray] = field(repr=False)
     systematic: FloatArray | None = field(default=None, repr=False)
+    mixture: Callable[[], ChannelMixture] | None = field(default=None, repr=False)
 
     def with_systematics(self, deviations: FloatArray) -> CalibratedSpectrum:
         """A copy with the VNA systematic error's draws ``(K, n_channels)`` attached."""
@@ -88,15 +95,33 @@ class CalibratedSpectrum:
         """Central credible interval at ``level`` per channel.
 
         ``calibration_only`` leaves out the source's own measurement noise (it keeps the
-        attached systematic error, an error of the calibration chain).
+        attached systematic error, an error of the calibration chain). For a
+        model-averaged solution, the quantiles of the mixture over models
+        (:mod:`calibration.mixture_interval`), the other errors joining each component;
+        otherwise ``mean +- t_q std``.
         """
+        if self.mixture is not None:
+            extra = self.std_systematic**2
+            if not calibration_only:
+                extra = extra + self.std_measurement**2
+            return central_interval(self.mixture(), extra, level)
         q = 0.5 + 0.5 * level
-        z = stats.norm.ppf(q) if np.isinf(self.dof) else stats.t.ppf(q, self.dof)
+        # A Student-t's quantile is its scale's multiple, and std^2 = scale^2 nu / (nu - 2).
+        z = stats.norm.ppf(q) if np.isinf(self.dof) else (
+            stats.t.ppf(q, self.dof) * np.sqrt(max(self.dof - 2.0, 0.0) / self.dof)
+        )
         if calibration_only:
             std = np.sqrt(self.std_calibration**2 + self.std_systematic**2)
         else:
             std = self.std
         return self.mean - z * std, self.mean + z * std
+
+    def covers(
+        self, truth: FloatArray, level: float = 0.68, calibration_only: bool = False
+    ) -> NDArray[np.bool_]:
+        """Per channel, whether :meth:`interval` at ``level`` holds ``truth`` (K)."""
+        lo, hi = self.interval(level, calibration_only)
+        return np.asarray((lo <= truth) & (truth <= hi))
 
     def samples(
         self, n: int, rng: np.random.Generator, calibration_only: bool = False
@@ -238,6 +263,9 @@ class Solution:
                 gamma_rec_std,
             )
             std_meas = np.sqrt(std_meas**2 + var_gamma)
+        mixture = None
+        if isinstance(post, MixturePosterior) and len(post.components) > 1:
+            mixture = cache(partial(channel_mixture, post, rows))  # once, for every interval
         return CalibratedSpectrum(
             freq,
             mean,
@@ -246,6 +274,7 @@ class Solution:
             post.dof,
             rows,
             lambda n, rng: np.asarray(post.sample(n, rng) @ rows.T),
+            mixture=mixture,
         )
 
     def summary(self) -> dict[str, Any]:

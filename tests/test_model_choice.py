@@ -268,8 +268,10 @@ def test_a_term_below_the_old_threshold_is_covered_by_the_averaged_predictive():
         channels = np.linspace(0, f.size - 1, 8).astype(int)
         for name, solution in solutions.items():
             calibrated = solution.calibrate(f, gr, run.validation_noiseless)
-            z = np.abs((calibrated.mean - truth) / calibrated.std_calibration)[channels]
-            hits[name].append([np.mean(z < 1.0), np.mean(z < 1.96)])
+            hits[name].append([
+                np.mean(calibrated.covers(truth, level, calibration_only=True)[channels])
+                for level in (0.68, 0.95)
+            ])
             chosen[name] += solution.best_orders[3] >= 3
     old, averaged = np.mean(hits["old"], axis=0), np.mean(hits["averaged"], axis=0)
     assert chosen["old"] <= 10, chosen  # the old prior drops the term
@@ -325,8 +327,10 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
             calibrated = solve_radiometric(run.data, average=average).calibrate(
                 f, gr, run.validation_noiseless
             )
-            z = np.abs((calibrated.mean - truth) / calibrated.std_calibration)[channels]
-            hits[name].append([np.mean(z < 1.0), np.mean(z < 1.96)])
+            hits[name].append([
+                np.mean(calibrated.covers(truth, level, calibration_only=True)[channels])
+                for level in (0.68, 0.95)
+            ])
     best, averaged = np.mean(hits["best"], axis=0), np.mean(hits["averaged"], axis=0)
     print(f"best {best}, averaged {averaged}")
     assert best[0] < 0.62, best

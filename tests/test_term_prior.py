@@ -109,8 +109,12 @@ def test_truths_drawn_from_the_prior_are_covered_at_the_nominal_rate():
         )
         channels = np.linspace(0, f.size - 1, 8).astype(int)
         error = calibrated.mean - run.validation_temperature_k
-        z = np.abs(error / calibrated.std_calibration)[channels]
-        hits.append([np.mean(z < 1.0), np.mean(z < 1.96)])
+        hits.append([
+            np.mean(calibrated.covers(
+                run.validation_temperature_k, level, calibration_only=True
+            )[channels])
+            for level in (0.68, 0.95)
+        ])
         ratios.append(np.mean(error**2) / np.mean(calibrated.std_calibration**2))
     covered, honesty = np.mean(hits, axis=0), float(np.sqrt(np.mean(ratios)))
     print(f"covered {covered}, actual/predicted {honesty:.3f}")
