@@ -564,8 +564,11 @@ def _read_channel_solution(f: Any, path: PathLike) -> ChannelSolution:
 def write_calibrated(
     path: PathLike, spectrum: CalibratedSpectrum, source: str, attrs: dict[str, Any] | None = None
 ) -> None:
-    """Write a calibrated spectrum: ``frequencies`` (Hz), ``mean`` and the stds (K).
+    """Write a calibrated spectrum: ``frequencies`` (Hz), ``mean``, the stds and intervals (K).
 
+    ``lower_68``/``upper_68`` and ``lower_95``/``upper_95`` are the central credible
+    intervals of the full predictive (:meth:`CalibratedSpectrum.interval`): for a
+    model-averaged solution the mixture's quantiles, which the stds alone do not give.
     With the VNA's systematic error attached, ``std_systematic`` and its Monte-Carlo
     draws (``systematic_draws``, deviations from ``mean``) go beside them.
     """
@@ -574,6 +577,11 @@ def write_calibrated(
         _dataset(f, "frequencies", spectrum.freq_hz, "Hz")
         for name in ("mean", "std", "std_calibration", "std_measurement"):
             _dataset(f, name, getattr(spectrum, name), "K")
+        for level in (68, 95):
+            bounds = spectrum.interval(level / 100)
+            for side, values in zip(("lower", "upper"), bounds, strict=True):
+                ds = _dataset(f, f"{side}_{level}", values, "K")
+                ds.attrs["description"] = f"{side} end of the central {level} % credible interval"
         if spectrum.systematic is not None:
             _dataset(f, "std_systematic", spectrum.std_systematic, "K")
             _dataset(f, "systematic_draws", spectrum.systematic, "K")

@@ -58,6 +58,12 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
         std, cal, meas = (f[k][()] for k in ("std", "std_calibration", "std_measurement"))
         np.testing.assert_allclose(std**2, cal**2 + meas**2, rtol=1e-12)
         mean = f["mean"][()]
+        lo68, hi68, lo95, hi95 = (
+            f[k][()] for k in ("lower_68", "upper_68", "lower_95", "upper_95")
+        )
+    assert np.all((lo95 < lo68) & (lo68 < mean) & (mean < hi68) & (hi68 < hi95))
+    # A Gaussian's 68 % interval is 2 sd wide; a mixture over models' a little narrower.
+    assert 1.6 < np.median((hi68 - lo68) / std) <= 2.0 + 1e-9
     table = np.loadtxt(csv, delimiter=",", skiprows=1)
     assert table.shape == (data.n_channels, 6)
     np.testing.assert_array_equal(table[:, 5], 0.0)  # no VNA systematic asked for
