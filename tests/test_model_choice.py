@@ -305,7 +305,8 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
     benchmark). Averaged, with the smooth-function hypothesis, the intervals cover near
     the nominal rates. 60 seeded runs at 205 channels, 8 channels each; tolerances about
     two binomial sigma of the correlated channels. Here, with a prior scale per parameter
-    (the default), the best model covers 59/90 % and the average 65/94 % (with type-II
+    (the default), the best model covers 59/90 % and the average 65/93 % (its mixture's
+    quantiles; 65/94 % read as mean +- z sd; with type-II
     widths 61/90 % and 65/95 %; with the widths fitted at the largest model alone 61/89 %
     and 66/94 %; the polynomials under widths refitted at their best, the smooth
     hypothesis too, 63/93 %; under one shared
