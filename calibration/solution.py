@@ -106,10 +106,13 @@ class CalibratedSpectrum:
                 extra = extra + self.std_measurement**2
             return central_interval(self.mixture(), extra, level)
         q = 0.5 + 0.5 * level
-        # A Student-t's quantile is its scale's multiple, and std^2 = scale^2 nu / (nu - 2).
-        z = stats.norm.ppf(q) if np.isinf(self.dof) else (
-            stats.t.ppf(q, self.dof) * np.sqrt(max(self.dof - 2.0, 0.0) / self.dof)
-        )
+        # A Student-t's quantile is its scale's multiple, and std^2 = scale^2 nu / (nu - 2)
+        # (no finite variance at nu <= 2: the std is then taken for the scale).
+        if np.isinf(self.dof):
+            z = stats.norm.ppf(q)
+        else:
+            ratio = (self.dof - 2.0) / self.dof if self.dof > 2.0 else 1.0
+            z = stats.t.ppf(q, self.dof) * np.sqrt(ratio)
         if calibration_only:
             std = np.sqrt(self.std_calibration**2 + self.std_systematic**2)
         else:
