@@ -90,6 +90,8 @@ SOLUTION_FORMAT = "reach-calibration-solution"
 #: ``solution_kind`` of a solution file: polynomial (the default when absent) or per channel.
 POLYNOMIAL_KIND, PER_CHANNEL_KIND = "polynomial", "per-channel"
 CALIBRATED_FORMAT = "reach-calibrated-spectrum"
+#: What a calibrated spectrum's ``lower_NN``/``upper_NN`` datasets hold.
+INTERVAL_DESCRIPTION = "an end of the central NN % credible interval of the full predictive"
 POWER_UNITS = "arbitrary (spectrometer power)"
 GAMMA_UNITS = "1 (complex reflection coefficient)"
 _MAJOR = FORMAT_VERSION.split(".")[0]
@@ -577,11 +579,8 @@ def write_calibrated(
         _dataset(f, "frequencies", spectrum.freq_hz, "Hz")
         for name in ("mean", "std", "std_calibration", "std_measurement"):
             _dataset(f, name, getattr(spectrum, name), "K")
-        for level in (68, 95):
-            bounds = spectrum.interval(level / 100)
-            for side, values in zip(("lower", "upper"), bounds, strict=True):
-                ds = _dataset(f, f"{side}_{level}", values, "K")
-                ds.attrs["description"] = f"{side} end of the central {level} % credible interval"
+        for name, values in spectrum.intervals().items():
+            _dataset(f, name, values, "K").attrs["description"] = INTERVAL_DESCRIPTION
         if spectrum.systematic is not None:
             _dataset(f, "std_systematic", spectrum.std_systematic, "K")
             _dataset(f, "systematic_draws", spectrum.systematic, "K")

@@ -119,6 +119,18 @@ class CalibratedSpectrum:
             std = self.std
         return self.mean - z * std, self.mean + z * std
 
+    def intervals(self, levels: tuple[float, ...] = (0.68, 0.95)) -> dict[str, FloatArray]:
+        """The full predictive's intervals by name: ``lower_68``, ``upper_68``, ... (K).
+
+        What files store beside the stds (:meth:`interval`; for an averaged solution the
+        mixture's quantiles, which the stds do not give).
+        """
+        out = {}
+        for level in levels:
+            percent = f"{100 * level:g}"
+            out[f"lower_{percent}"], out[f"upper_{percent}"] = self.interval(level)
+        return out
+
     def covers(
         self, truth: FloatArray, level: float = 0.68, calibration_only: bool = False
     ) -> NDArray[np.bool_]:

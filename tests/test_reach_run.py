@@ -198,6 +198,11 @@ def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, ca
     sky = 2000.0 * (arrays["frequencies"] / 75e6) ** -2.5
     z = (arrays["mean"] - sky) / arrays["std"]
     assert 0.55 < np.mean(np.abs(z) < 1) < 0.8
+    # The credible intervals stored beside the std (for an averaged solution the
+    # mixture's quantiles): nested about the mean, and holding the sky as often.
+    lo68, hi68, lo95, hi95 = (arrays[k] for k in ("lower_68", "upper_68", "lower_95", "upper_95"))
+    assert np.all((lo95 < lo68) & (lo68 < arrays["mean"]) & (arrays["mean"] < hi68) & (hi68 < hi95))
+    assert 0.55 < np.mean((lo68 <= sky) & (sky <= hi68)) < 0.8
 
 
 def test_a_second_calibration_is_verified_against_the_first(tmp_path, capsys):

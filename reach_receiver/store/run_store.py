@@ -18,7 +18,8 @@ Contents of the measurement kinds (each becomes ``/measurements/NNNNNN_<kind>_<n
                  attrs keys, units (per series), status_names
     check        attrs passed, details (JSON); one dataset per array (units from its name)
     solution     solution/ (the engine's solution layout); attr verification (JSON)
-    calibrated   frequencies (Hz), mean (K), std (K), flags (1)
+    calibrated   frequencies (Hz), mean (K), std (K), flags (1), lower_68, upper_68,
+                 lower_95, upper_95 (K; the credible intervals' ends)
     event        attrs event, message
 
 Names of S11 measurements are source names (REACH names) and ``lna`` for the receiver.
@@ -476,15 +477,22 @@ class RunStore:
         return self._add("solution", solution.method, timestamp, fill)
 
     def add_calibrated(
-        self, name: str, freq_hz: Any, mean: Any, std: Any, flags: Any, *, timestamp: float
+        self, name: str, freq_hz: Any, mean: Any, std: Any, flags: Any, *, timestamp: float,
+        intervals: Mapping[str, Any] | None = None,
     ) -> None:
-        """Store a calibrated spectrum: mean and standard deviation (K) and channel flags."""
+        """Store a calibrated spectrum: mean, standard deviation (K) and channel flags.
+
+        ``intervals``: the credible intervals' ends by name (K; ``lower_68``, ``upper_68``,
+        ...), what the std alone does not give for a model-averaged solution.
+        """
 
         def fill(f: Any) -> None:
             dataset(f, "frequencies", np.asarray(freq_hz, dtype=float), UNITS_HZ)
             dataset(f, "mean", np.asarray(mean, dtype=float), UNITS_K)
             dataset(f, "std", np.asarray(std, dtype=float), UNITS_K)
             dataset(f, "flags", np.asarray(flags, dtype=bool), UNITS_NONE)
+            for key, values in (intervals or {}).items():
+                dataset(f, key, np.asarray(values, dtype=float), UNITS_K)
 
         self._add("calibrated", name, timestamp, fill)
 

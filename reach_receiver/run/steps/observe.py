@@ -60,7 +60,8 @@ def calibrate_cycle(run: RunContext, source: str, number: int, name: str, thresh
     )
     flags = rfi_flags(spectrum.mean, threshold)
     run.store.add_calibrated(
-        name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now()
+        name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now(),
+        intervals=spectrum.intervals(),
     )
     log.info("observe: %s calibrated, %d channels flagged", name, flags.sum())
 
