@@ -23,7 +23,6 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from .averaging import MixturePosterior
 from .basis import PolynomialBasis
@@ -98,26 +97,19 @@ class CalibratedSpectrum:
         attached systematic error, an error of the calibration chain). For a
         model-averaged solution, the quantiles of the mixture over models
         (:mod:`calibration.mixture_interval`), the other errors joining each component;
-        otherwise ``mean +- t_q std``.
+        otherwise that of the one Student-t whose variance is the total.
         """
         if self.mixture is not None:
-            extra = self.std_systematic**2
-            if not calibration_only:
-                extra = extra + self.std_measurement**2
-            return central_interval(self.mixture(), extra, level)
-        q = 0.5 + 0.5 * level
-        # A Student-t's quantile is its scale's multiple, and std^2 = scale^2 nu / (nu - 2)
-        # (no finite variance at nu <= 2: the std is then taken for the scale).
-        if np.isinf(self.dof):
-            z = stats.norm.ppf(q)
-        else:
-            ratio = (self.dof - 2.0) / self.dof if self.dof > 2.0 else 1.0
-            z = stats.t.ppf(q, self.dof) * np.sqrt(ratio)
-        if calibration_only:
-            std = np.sqrt(self.std_calibration**2 + self.std_systematic**2)
-        else:
-            std = self.std
-        return self.mean - z * std, self.mean + z * std
+            mixture = self.mixture()
+        else:  # one Student-t: the mixture of one component, the same quantile rule
+            mixture = ChannelMixture(
+                np.ones(1), self.mean[None, :], self.std_calibration[None, :] ** 2,
+                np.array([self.dof], dtype=float),
+            )
+        extra = self.std_systematic**2
+        if not calibration_only:
+            extra = extra + self.std_measurement**2
+        return central_interval(mixture, extra, level)
 
     def intervals(self, levels: tuple[float, ...] = (0.68, 0.95)) -> dict[str, FloatArray]:
         """The full predictive's intervals by name: ``lower_68``, ``upper_68``, ... (K).
