@@ -19,7 +19,9 @@ The timings run in fresh subprocesses, twice: with the BLAS threading as install
 (OpenBLAS uses every core) and with ``OPENBLAS_NUM_THREADS=1`` (and the OMP/MKL
 equivalents). On a 2-core machine that other processes keep busy, multi-threaded OpenBLAS
 spin-waits for descheduled threads and every solver slows down several-fold; the
-single-threaded numbers show the code's own speed.
+single-threaded numbers show the code's own speed. The radiometric solver runs its BLAS on
+one thread whatever is installed (:mod:`calibration.blas_threads`): its thousands of small
+calls were twice as slow on two threads, on an idle machine too.
 """
 
 from __future__ import annotations

@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 
 from .averaging import MixturePosterior
 from .basis import BasisKind, PolynomialBasis
+from .blas_threads import with_one_blas_thread
 from .conjugate import CoefficientPrior, ScalePrior
 from .correlated_reflections import shared_error_excess, widen
 from .data import CalibrationData
@@ -169,6 +170,7 @@ def _normal_equations(
     )
 
 
+@with_one_blas_thread
 def solve_radiometric(
     data: CalibrationData,
     orders: OrderChoice | None = None,
