@@ -16,7 +16,7 @@ as installed and pinned, side by side.
 ``with`` block, through threadpoolctl (the library scikit-learn uses for the same
 purpose), and restores the previous counts after it. The limit is per process: BLAS calls
 of other threads during a solve also run on one thread, and two solves overlapping in
-time may leave the second's tail on the restored count (slower, never different).
+time may leave the second's tail on the restored count: slower, not wrong.
 """
 
 from __future__ import annotations
