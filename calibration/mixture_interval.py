@@ -100,12 +100,7 @@ class ChannelMixture:
         gaussian = np.isinf(nu)
         finite_nu = np.where(gaussian, 1.0, nu)
         cdf = np.where(gaussian, special.ndtr(t), special.stdtr(finite_nu, t))
-        log_t = (
-            special.gammaln(0.5 * (finite_nu + 1.0)) - special.gammaln(0.5 * finite_nu)
-            - 0.5 * np.log(finite_nu * np.pi)
-            - 0.5 * (finite_nu + 1.0) * np.log1p(t * t / finite_nu)
-        )
-        density = np.where(gaussian, np.exp(-0.5 * t * t) / np.sqrt(2.0 * np.pi), np.exp(log_t))
+        density = np.where(gaussian, stats.norm.pdf(t), stats.t.pdf(t, finite_nu))
         density = np.where(point, 0.0, density / safe)
         return self.weights @ cdf, self.weights @ density
 
