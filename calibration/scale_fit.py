@@ -48,46 +48,17 @@ mode (:func:`log_occam`, Laplace's method about the mode): five widths fitted to
 higher terms of the smooth functions are pinned down more sharply than five fitted to a
 few terms of a polynomial, and pay a larger Occam factor for it (2-3 nats more, median).
 
-Measured on the benchmark's ensembles, whose random terms are drawn at 0.3-30 times the
-data's own posterior sd (``python -m benchmarks.model_choice --runs 100 --seed 100``, the
-same runs; median error / floor, RMS over runs, actual / predicted error and 68/95 %
-coverage; README, "Model choice", for every row):
-
-* the default: the issue's own case (quadratics of 1-5 K, full resolution) 0.907, 1.082,
-  1.00, 70/95 %; 8 calibrators 1.004, 1.166, 1.12, 64/94 %; the four EDGES loads 0.987,
-  1.095, 1.04, 68/94 %; every other row within the issue's bounds (the intervals the
-  mixture's quantiles, :mod:`calibration.mixture_interval`; the rows below read them as
-  mean +- z sd, which gave the default 71/95 % and 69/93 % on those two rows).
-* the hypotheses weighed at their widths' modes (the default before): the issue's case
-  1.002, 1.106, 0.98, 72/95 % (the smooth functions won about one run in six, and their
-  decay shrank the real quadratic terms); 8 calibrators 1.048, 1.184, 1.08, 66/95 %; the
-  four loads 1.007, 1.115, 1.02, 70/94 %. The alternatives below were measured so too.
-* type-II widths alone (``width_scale_from_data=False``, the default before the
-  half-Cauchy prior): 8 calibrators 1.063, 1.181, 1.15, 64/94 %; the four loads 0.994,
-  1.110, 1.08, 67/92 %: error bars short where the data see least.
-* a fixed scale instead of the receiver's (``width_hyperprior_k``): 10 K, the size of the
-  REACH-like simulation's first-order terms, 8 calibrators 1.073, 1.180, 1.10, 64/94 %,
-  the four loads 1.025, 1.122, 1.04, 68/94 %, the smooth truths 64.6 % in the 68 %
-  interval; 1 K, 1.043, 1.179, 1.08, 66/95 % and 0.988, 1.105, 1.01, 69/94 %; 100 K and
-  3000 K, 8 calibrators 1.096, 1.189, 1.13 and 1.095, 1.198, 1.12. A fixed scale decides
-  part of the answer; the one set by the data needs none.
-* one marginalised shared scale: 8 calibrators 1.011, 1.142, 1.16, 64/92 %; the four
-  loads 1.036, 1.142, 1.24, 63/89 %; smooth truths 0.682, 0.718, 1.15, 65/91 %.
-* the widths fitted at the largest model alone, for both hypotheses: 8 calibrators 1.090,
-  1.209, 1.11, 66/94 % (type-II); refitted for both (the smooth hypothesis under the
-  polynomials' widths too): 1.018, 1.174, 1.19, 61/93 %.
-
-Tried and not kept (8 calibrators, type-II widths): a Laplace Occam factor for the
-widths (1.11 -> 1.11 actual/predicted: on the floor, an unseen width's evidence is flat,
-and the factor moved little; under the half-Cauchy prior it is the default); the widths
-refitted at each of the 20 leading models (1.064, 1.178, 1.14); the widths marginalised
-by importance sampling (:func:`calibration.parameter_scales.draw_scales`) at the 1-20
-leading models and the smooth one (1.02-1.05, 1.16-1.17, 1.11-1.12, at 1.5-3 times the
-solve's time). Tried with the Laplace factor (8 calibrators, the same 100 runs, RMS and
-actual / predicted 1.166 and 1.122): the decay marginalised as well, each hypothesis
-summed over the grid's decays with each one's own factor (1.165, 1.123), its posterior
-too (1.161, 1.123); the smooth functions with a decay per parameter, ten widths fitted
-and marginalised (1.165, 1.120). The decay is not where the excess lies.
+Measured on the benchmark's ensembles (``python -m benchmarks.model_choice --runs 100
+--seed 100``; README, "Model choice", gives every row and the alternatives): against
+type-II widths alone, the half-Cauchy's receiver scale lengthens the error bars where the
+data see least (8 calibrators, actual / predicted 1.15 -> 1.12); a fixed scale for it
+(1, 10, 100 or 3000 K) moves the figures with a number nobody measured; the widths
+marginalised rather than taken at their mode (:func:`log_occam`) stop the smooth
+functions winning runs of exact quadratics 6-10 nats below the best polynomial (the
+issue's case, RMS over runs 1.106 -> 1.082). Refitting the widths at each leading model
+or marginalising them by importance sampling moved none of the figures, nor did
+marginalising the decay (8 calibrators, RMS over runs 1.165 and, its posterior too,
+1.161, against 1.166) or giving the smooth functions a decay per parameter (1.165).
 """
 
 from __future__ import annotations
