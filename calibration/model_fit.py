@@ -481,7 +481,9 @@ def fit_extending(
 ) -> FitResult:
     """:func:`fit` on ``build(max_orders)``, raising limits the evidence runs into.
 
-    ``build`` makes the normal equations for given largest orders (the solvers' likelihood).
+    ``build`` makes the normal equations for given largest orders (the solvers' likelihood),
+    or for smaller ones where the data identify no more (their ``max_orders``): a
+    parameter cut so is not raised again.
     With a :class:`ShrinkagePrior` the evidence table is that of the last normal
     equations alone, so that every entry is computed the same way. ``smooth()``, asked
     after each ``build``, says whether the smooth-function hypothesis may join (:func:`fit`).
@@ -491,8 +493,11 @@ def fit_extending(
     largest = choice.largest
     table: dict[Orders, float] = {}
     best: tuple[Orders, ...] = ()
+    capped: set[int] = set()  # parameters a build cut below what it was asked for
     while True:
         normal = build(largest)
+        asked, largest = largest, normal.max_orders
+        capped |= {k for k, (n, m) in enumerate(zip(largest, asked, strict=True)) if n < m}
         skipped: dict[Orders, str] = {}
         posterior, part = _fit(
             normal,
@@ -517,7 +522,7 @@ def fit_extending(
             for k, (n, m) in enumerate(zip(chosen, largest, strict=True))
             if n == m and choice.orders is None
         ]
-        grow = [k for k in hit if largest[k] < choice.ceiling]
+        grow = [k for k in hit if largest[k] < choice.ceiling and k not in capped]
         if not grow:
             names = tuple(PARAMETERS[k] for k in hit)
             return FitResult(posterior(), table, normal, largest, names, skipped)

@@ -47,7 +47,7 @@ from .polynomial_model import Orders, as_orders, coefficient_slices, full_indice
 FloatArray = NDArray[np.float64]
 
 
-def _project_pairs(
+def project_pairs(
     features: FloatArray, weights: FloatArray, basis: FloatArray, max_orders: Orders
 ) -> FloatArray:
     """``G = sum_if w x x^T`` assembled block by block from per-channel feature moments.
@@ -103,21 +103,21 @@ def sandwich_gram(
     """
     orders = as_orders(max_orders)
     wwd = weights**2 * variance
-    out = _project_pairs(features, wwd, basis, orders)
+    out = project_pairs(features, wwd, basis, orders)
     if offset_variance is None:
         return out
     for m, var in enumerate(np.asarray(offset_variance, dtype=float)):
         if var <= 0:
             continue
         k = var / (1.0 + var * float(np.sum(weights[m])))
-        u = _project_vector(features[m : m + 1], weights[m : m + 1], basis, orders)
-        s = _project_vector(features[m : m + 1], wwd[m : m + 1], basis, orders)
+        u = project_vector(features[m : m + 1], weights[m : m + 1], basis, orders)
+        s = project_vector(features[m : m + 1], wwd[m : m + 1], basis, orders)
         a = float(np.sum(wwd[m]))
         out = out - k * (np.outer(s, u) + np.outer(u, s)) + k * k * a * np.outer(u, u)
     return out
 
 
-def _project_vector(
+def project_vector(
     features: FloatArray, weighted_residual: FloatArray, basis: FloatArray, max_orders: Orders
 ) -> FloatArray:
     """``sum_if x_if * (w r)_if`` for every coefficient."""
@@ -197,9 +197,9 @@ def build_normal_equations(
     response: the calibrators' temperature uncertainty (module docstring).
     """
     max_orders = as_orders(max_orders)
-    gram = _project_pairs(features, weights, basis, max_orders)
+    gram = project_pairs(features, weights, basis, max_orders)
     if reference is None:
-        rhs = _project_vector(features, weights * response, basis, max_orders)
+        rhs = project_vector(features, weights * response, basis, max_orders)
         ridge_diag = np.zeros(len(rhs)) if ridge is None else np.asarray(ridge, dtype=float)
         scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
         a = gram / np.outer(scale, scale) + np.diag(ridge_diag / scale**2 + 1e-12)
@@ -208,7 +208,7 @@ def build_normal_equations(
         "mnk,kn->mn", features, evaluate_coefficients(reference, basis, max_orders)
     )
     wr = weights * residual
-    cross = _project_vector(features, wr, basis, max_orders)
+    cross = project_vector(features, wr, basis, max_orders)
     chi2_ref = float(np.sum(wr * residual))
     sum_log_weights = float(np.sum(np.log(weights)))
     if offset_variance is not None:
@@ -216,7 +216,7 @@ def build_normal_equations(
             if var <= 0:
                 continue
             a = float(np.sum(weights[m]))
-            u = _project_vector(features[m : m + 1], weights[m : m + 1], basis, max_orders)
+            u = project_vector(features[m : m + 1], weights[m : m + 1], basis, max_orders)
             v = float(np.sum(wr[m]))
             k = var / (1.0 + var * a)
             gram = gram - k * np.outer(u, u)

@@ -37,11 +37,17 @@ evidence-weighted mixture of the models that carry the weight (:mod:`calibration
 from the same normal equations, linearised at the largest model's fit: the chosen
 model's own fit is within the noise of it, so the Gauss-Newton step from there is exact
 to second order in that difference (about 1e-8 of T_NS).
+
+Where the reflections' errors are known, the rows' dependence on them is taken out of
+the normal equations and the order box is cut to what the calibrators identify above
+them (:mod:`calibration.errors_in_variables`): few calibrators otherwise let the fit
+trade those errors' variance for a wrong model.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,6 +59,14 @@ from .conjugate import CoefficientPrior, ScalePrior
 from .correlated_reflections import shared_error_excess, widen
 from .data import CalibrationData
 from .errors import IllPosedError
+from .errors_in_variables import (
+    MU_MAX,
+    corrected,
+    error_moments,
+    identified_orders,
+    row_errors,
+    unidentified_share,
+)
 from .identifiability import (
     check_determined,
     require_matched_contrast,
@@ -60,7 +74,7 @@ from .identifiability import (
     require_temperature_contrast,
 )
 from .model_fit import OrderChoice, fit, fit_extending
-from .noise_waves import INDEX, DesignTerms, model_q
+from .noise_waves import INDEX, DesignTerms, design_terms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders
 from .reflection_noise import reflection_variance, temperature_variance
@@ -126,8 +140,9 @@ class _LastRows:
     """The last linearisation's rows, reflection variances, operating point and layout.
 
     Read twice: by the posterior's widening for reflection errors shared between
-    channels (:func:`_shared_errors`), and by ``build`` when the order limits are raised,
-    whose first relinearisation starts from ``theta`` (``problem is None``: no earlier
+    channels (:func:`_shared_errors`) and for the moment correction's own variance
+    (``error_gram``), and by ``build`` when the order limits are raised, whose first
+    relinearisation starts from ``theta`` (``problem is None``: no earlier
     linearisation, so the thesis's start is used).
     """
 
@@ -135,6 +150,8 @@ class _LastRows:
     theta: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     basis: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     largest: Orders = ()  # type: ignore[assignment]
+    #: ``C`` of :mod:`calibration.errors_in_variables` where the rows were corrected.
+    error_gram: FloatArray | None = None
 
 
 def _shared_errors(
@@ -168,6 +185,15 @@ def _normal_equations(
         ridge=ridge,
         offset_variance=offset_variance,
     )
+
+
+def _rows(
+    gamma: NDArray[np.complex128], gamma_rec: NDArray[np.complex128], *, temps: FloatArray,
+    q: FloatArray, var_q: FloatArray, theta: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """The Gauss-Newton rows' features and response about ``theta`` at given reflections."""
+    problem = linearise(design_terms(gamma, gamma_rec[None, :]), temps, q, var_q, theta)
+    return problem.features, problem.response
 
 
 @with_one_blas_thread
@@ -219,8 +245,10 @@ def solve_radiometric(
     # The last linearisation's rows and reflection variances, for the posterior's share
     # of reflection errors shared by neighbouring channels (correlated_reflections).
     last = _LastRows()
+    # Order boxes cut to what the calibrators identify above their reflections' errors.
+    cuts: list[tuple[Orders, Orders]] = []
 
-    def build(largest: Orders) -> NormalEquations:
+    def linearised(largest: Orders) -> NormalEquations:
         b = basis.matrix(data.freq_hz, max(largest))
         # Limits raised (fit_extending): the last operating point is the better start.
         warm = last.problem is not None and iterations > 0
@@ -237,6 +265,47 @@ def solve_radiometric(
             normal = _normal_equations(problem, b, largest, ridge(largest), offset_var)
             last.problem, last.theta, last.basis, last.largest = problem, theta, b, largest
         return normal
+
+    def build(largest: Orders) -> NormalEquations:
+        """The normal equations at ``largest``, or within it.
+
+        At the largest orders within ``largest`` that the calibrators identify above their
+        reflections' errors, corrected for those errors' bias
+        (:mod:`calibration.errors_in_variables`).
+        """
+        while True:
+            normal = linearised(largest)
+            last.error_gram = None
+            if iterations == 0 or last.problem is None:
+                return normal
+            theta = last.theta
+            errors = row_errors(
+                partial(_rows, temps=temps, q=q, var_q=var_q, theta=theta),
+                gammas, data.gamma_rec, gamma_std, data.gamma_rec_std,
+            )
+            if errors is None:
+                return normal
+            weights, b = last.problem.weights, last.basis
+            moments = error_moments(errors, weights, b, largest)
+            fewer = identified_orders(
+                normal.gram, moments.gram, largest, choice.min_orders, MU_MAX
+            )
+            if fewer != largest:  # restart at the smaller box from the thesis's start
+                cuts.append((largest, fewer))
+                largest, last.problem = fewer, None
+                continue
+            mu = unidentified_share(normal.gram, moments.gram, largest, largest)
+            if mu > MU_MAX:
+                if allow_prior_dominated:
+                    return normal
+                raise IllPosedError(
+                    f"the calibrators {list(data.names)} do not identify a model with orders "
+                    f"{largest} above their reflections' errors: in one direction those "
+                    f"errors carry {mu:.2f} of the apparent information (at most {MU_MAX}); "
+                    "lower the orders, add calibrators or measure the reflections better"
+                )
+            last.error_gram = moments.gram
+            return corrected(normal, moments, errors, weights, b, theta)
 
     # Whether the largest model's fit keeps T_NS positive: only then may it join the
     # average as the smooth-function hypothesis (a model that takes T_NS through zero is
@@ -266,11 +335,18 @@ def solve_radiometric(
     )
     posterior, table = result.posterior, result.table
     metadata: dict[str, object] = dict(result.limits_metadata())
+    if cuts:
+        metadata["orders_identified_above_reflection_errors"] = [
+            {"asked": list(a), "identified": list(b)} for a, b in cuts
+        ]
     shared = data.reflection_correlation_channels
+    excess = last.error_gram  # the corrected fit's own sandwich (errors_in_variables)
     if last.problem is not None and gamma_std is not None and shared > 1:
-        excess = _shared_errors(data, last, gammas, q, gamma_std)
-        posterior = widen(posterior, excess, last.largest)
+        share = _shared_errors(data, last, gammas, q, gamma_std)
+        excess = share if excess is None else excess + share
         metadata["reflection_correlation_channels"] = data.reflection_correlation_channels
+    if excess is not None:
+        posterior = widen(posterior, excess, last.largest)
     best = max(table, key=table.__getitem__)
     metadata["best_orders"] = list(best)
     if isinstance(posterior, MixturePosterior):

@@ -18,11 +18,13 @@ moves ``T`` the same way with ``J = dT / d(Re, Im) Gamma_rec``
 (:func:`receiver_temperature_variance`). That error is common to every source at a
 channel: for a calibrated source it is a variance of its own, per channel, which no fit of
 smooth parameters can absorb, and the predictive carries it; in the calibrators' rows it
-sits in each row's variance (it does not bias the fit; its sharing between the rows, and
-its partial cancellation in a calibrated source, are discussed in
-:mod:`calibration.correlated_reflections`, which widens the posterior for the sources' own
-errors shared between neighbouring channels). Two errors on different sweeps are
-independent and their variances add.
+sits in each row's variance (its sharing between the rows, and its partial cancellation
+in a calibrated source, are discussed in :mod:`calibration.correlated_reflections`, which
+widens the posterior for the sources' own errors shared between neighbouring channels).
+Two errors on different sweeps are independent and their variances add. A row's variance
+depends on the coefficients it is evaluated at, which a fit can exploit where the
+calibrators leave a direction nearly free: :mod:`calibration.errors_in_variables` removes
+that bias and cuts the orders to what the calibrators identify above these errors.
 
 The VNA's systematic errors (thesis table 2.3), correlated across channels and sweeps,
 are :mod:`calibration.vna_systematics`'.
