@@ -68,6 +68,7 @@ from .errors_in_variables import (
     unidentified_share,
 )
 from .identifiability import (
+    UndeterminedError,
     check_determined,
     require_matched_contrast,
     require_positive_ns,
@@ -76,7 +77,7 @@ from .identifiability import (
 from .model_fit import OrderChoice, fit, fit_extending
 from .noise_waves import INDEX, DesignTerms, design_terms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
-from .polynomial_model import Orders
+from .polynomial_model import Orders, as_orders
 from .reflection_noise import reflection_variance, temperature_variance
 from .shrinkage import ShrinkagePrior
 from .solution import Solution
@@ -245,8 +246,8 @@ def solve_radiometric(
     # The last linearisation's rows and reflection variances, for the posterior's share
     # of reflection errors shared by neighbouring channels (correlated_reflections).
     last = _LastRows()
-    # Order boxes cut to what the calibrators identify above their reflections' errors.
-    cuts: list[tuple[Orders, Orders]] = []
+    # Order boxes cut to what the calibrators determine: (asked, kept, why).
+    cuts: list[tuple[Orders, Orders, str]] = []
 
     def linearised(largest: Orders) -> NormalEquations:
         b = basis.matrix(data.freq_hz, max(largest))
@@ -274,7 +275,21 @@ def solve_radiometric(
         (:mod:`calibration.errors_in_variables`).
         """
         while True:
-            normal = linearised(largest)
+            try:
+                normal = linearised(largest)
+            except UndeterminedError:
+                # The largest models' fits take T_NS through zero (operating_point): the
+                # box's top terms are what the calibrators leave free; try without them.
+                top = max(largest)
+                smallest = choice.min_orders
+                fewer = as_orders([
+                    n - (n == top and n > m) for n, m in zip(largest, smallest, strict=True)
+                ])
+                if fewer == largest:
+                    raise
+                cuts.append((largest, fewer, "their fits took T_NS through zero"))
+                largest, last.problem = fewer, None
+                continue
             last.error_gram = None
             if iterations == 0 or last.problem is None:
                 return normal
@@ -291,7 +306,7 @@ def solve_radiometric(
                 normal.gram, moments.gram, largest, choice.min_orders, MU_MAX
             )
             if fewer != largest:  # restart at the smaller box from the thesis's start
-                cuts.append((largest, fewer))
+                cuts.append((largest, fewer, "the reflections' errors decided them"))
                 largest, last.problem = fewer, None
                 continue
             mu = unidentified_share(normal.gram, moments.gram, largest, largest)
@@ -336,8 +351,8 @@ def solve_radiometric(
     posterior, table = result.posterior, result.table
     metadata: dict[str, object] = dict(result.limits_metadata())
     if cuts:
-        metadata["orders_identified_above_reflection_errors"] = [
-            {"asked": list(a), "identified": list(b)} for a, b in cuts
+        metadata["order_box_cuts"] = [
+            {"asked": list(a), "kept": list(b), "why": why} for a, b, why in cuts
         ]
     shared = data.reflection_correlation_channels
     excess = last.error_gram  # the corrected fit's own sandwich (errors_in_variables)

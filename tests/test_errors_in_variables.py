@@ -158,8 +158,9 @@ def test_four_calibrators_with_vna_noise_calibrate_an_antenna_within_its_error_b
     predicted = float(np.sqrt(np.mean(cal.std**2)))
     assert error / floor < 1.5
     assert error / predicted < 1.5
-    cut = solution.metadata["orders_identified_above_reflection_errors"]
+    cut = solution.metadata["order_box_cuts"]
     assert cut[0]["asked"] == [8, 8, 8, 8, 8]
+    assert cut[0]["why"] == "the reflections' errors decided them"
 
 
 def test_fixed_orders_the_calibrators_cannot_identify_are_refused():
@@ -174,4 +175,4 @@ def test_without_reflection_errors_nothing_is_cut():
     """No VNA noise known: the normal equations are the plain ones (no cut, no entry)."""
     run = simulate_run(SimulationConfig(channel_width_hz=WIDTH), rng=np.random.default_rng(0))
     solution = solve_radiometric(run.data)
-    assert "orders_identified_above_reflection_errors" not in solution.metadata
+    assert "order_box_cuts" not in solution.metadata

@@ -154,3 +154,28 @@ def test_real_edges3_without_the_open_load_searches_to_an_answer(edges3):
     t_ns = solution.evaluate(edges3.freq_hz)[3]
     assert np.all((t_ns > 900.0) & (t_ns < 1500.0))
     assert solution.metadata["prior_dominated"] == {}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_box_whose_top_terms_take_t_ns_through_zero_is_cut_not_refused(seed):
+    """Four calibrators, two of them reflective at |Gamma| ~ 0.3 only, no VNA noise: the
+    largest models' fits (8 terms each) take T_NS through zero in a quarter of the band,
+    and so did the evidence's models fitted on the same equations, so the solve was
+    refused (T_NS undetermined) in all four seeds, where the truth's own orders calibrate
+    at the floor. Now the box loses its top terms until the fits keep T_NS positive, and
+    the solve recovers the antenna within twice the floor, its error bars within 1.5 of
+    the error."""
+    from calibration.noise_floor import noise_floor
+    from tests.test_errors_in_variables import _weak_run
+
+    run = _weak_run(seed, vna_sigma=0.0)
+    data = run.data
+    solution = solve_radiometric(data)
+    cal = solution.calibrate(data.freq_hz, data.gamma_rec, run.validation_noiseless)
+    error = float(np.sqrt(np.mean((cal.mean - run.validation_temperature_k) ** 2)))
+    floor = noise_floor(data, run.validation_noiseless, run.truth.parameters).rms
+    assert error / floor < 2.0
+    assert error / float(np.sqrt(np.mean(cal.std**2))) < 1.5
+    cuts = solution.metadata["order_box_cuts"]
+    assert cuts[0]["asked"] == [8, 8, 8, 8, 8]
+    assert cuts[0]["why"] == "their fits took T_NS through zero"
