@@ -190,8 +190,10 @@ def unidentified_share(gram: FloatArray, moments: FloatArray, orders: Orders,
 def identified_orders(
     gram: FloatArray, moments: FloatArray, largest: Orders, smallest: Orders,
     mu_max: float = MU_MAX,
-) -> Orders:
-    """The largest orders, at most ``largest``, whose model the data identify (``mu <= mu_max``).
+) -> tuple[Orders, float]:
+    """The largest orders within ``largest`` that the data identify, and their ``mu``.
+
+    Identified: ``mu <= mu_max``.
 
     While ``largest`` is not identified, the box shrinks from the top: of the parameters
     with the most terms, the one whose last term's removal lowers ``mu`` most loses it.
@@ -214,4 +216,4 @@ def identified_orders(
                 fewer = as_orders([m - (j == k) for j, m in enumerate(orders)])
                 trials.append((unidentified_share(gram, moments, fewer, largest), fewer))
         mu, orders = min(trials)
-    return orders
+    return orders, mu

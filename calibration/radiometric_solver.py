@@ -65,7 +65,6 @@ from .errors_in_variables import (
     error_moments,
     identified_orders,
     row_errors,
-    unidentified_share,
 )
 from .identifiability import (
     UndeterminedError,
@@ -302,14 +301,13 @@ def solve_radiometric(
                 return normal
             weights, b = last.problem.weights, last.basis
             moments = error_moments(errors, weights, b, largest)
-            fewer = identified_orders(
+            fewer, mu = identified_orders(
                 normal.gram, moments.gram, largest, choice.min_orders, MU_MAX
             )
             if fewer != largest:  # restart at the smaller box from the thesis's start
                 cuts.append((largest, fewer, "the reflections' errors decided them"))
                 largest, last.problem = fewer, None
                 continue
-            mu = unidentified_share(normal.gram, moments.gram, largest, largest)
             if mu > MU_MAX:
                 if allow_prior_dominated:
                     return normal

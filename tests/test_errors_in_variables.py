@@ -136,8 +136,8 @@ def test_the_weak_set_identifies_its_true_orders_but_not_the_box(rows_at_truth):
         assert unidentified_share(normal.gram, moments, small, BOX) <= (
             unidentified_share(normal.gram, moments, big, BOX) + 1e-9
         )
-    cut = identified_orders(normal.gram, moments, BOX, (1,) * 5)
-    assert unidentified_share(normal.gram, moments, cut, BOX) <= MU_MAX
+    cut, mu = identified_orders(normal.gram, moments, BOX, (1,) * 5)
+    assert mu == unidentified_share(normal.gram, moments, cut, BOX) <= MU_MAX
     assert all(t <= c for t, c in zip(truth, cut, strict=True)), cut
     assert max(cut) - min(cut) <= 1  # shrunk from the top, evenly
 
