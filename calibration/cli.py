@@ -57,7 +57,7 @@ from .hdf5_io import (
     write_run,
     write_solution,
 )
-from .identifiability import prior_dominated_line
+from .identifiability import caution_lines
 from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .per_frequency import ChannelSolution
 from .polynomial_model import coefficient_slices
@@ -171,8 +171,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))} ({how})")
         if solution.models_line():
             print(f"averaged over models (orders, weight): {solution.models_line()}")
-        if prior_dominated_line(solution):
-            print(prior_dominated_line(solution))
+        for line in caution_lines(solution):
+            print(line)
         print(f"log evidence: {post.log_evidence:.3f}")
         print(_noise_line(solution))
     else:
@@ -288,8 +288,8 @@ def cmd_summary(args: argparse.Namespace) -> int:
     if solution.models_line():
         print(f"averaged over models (orders, weight): {solution.models_line()}")
         print(f"posterior layout (the models' envelope): {solution.orders}")
-    if prior_dominated_line(solution):
-        print(prior_dominated_line(solution))
+    for line in caution_lines(solution):
+        print(line)
     at_ceiling = solution.metadata.get("orders_at_ceiling") or []
     if at_ceiling:
         print(

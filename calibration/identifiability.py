@@ -202,6 +202,32 @@ def check_determined(
     return dominated
 
 
+def caution_lines(solution: Solution) -> list[str]:
+    """What a summary must say beside the orders (those that apply).
+
+    :func:`prior_dominated_line` and :func:`box_cut_line`.
+    """
+    return [line for line in (prior_dominated_line(solution), box_cut_line(solution)) if line]
+
+
+def box_cut_line(solution: Solution) -> str:
+    """A note naming the order boxes the solver cut, and why (empty if none).
+
+    The radiometric solver cuts its box where the calibrators do not determine the
+    largest models (``metadata["order_box_cuts"]``): structure beyond the kept box cannot
+    be represented, and its bias is not in the error bars.
+    """
+    cuts = solution.metadata.get("order_box_cuts") or []
+    if not cuts:
+        return ""
+    reasons = "; ".join(dict.fromkeys(c["why"] for c in cuts))
+    return (
+        f"note: the calibrators do not determine the largest models; the order box was cut "
+        f"from {tuple(cuts[0]['asked'])} to {tuple(cuts[-1]['kept'])} ({reasons}). "
+        "Structure beyond it is not in the error bars"
+    )
+
+
 def prior_dominated_line(solution: Solution) -> str:
     """A warning for a summary, naming the prior-dominated parameters (empty if none)."""
     dominated = solution.metadata.get("prior_dominated") or {}

@@ -179,3 +179,18 @@ def test_a_box_whose_top_terms_take_t_ns_through_zero_is_cut_not_refused(seed):
     cuts = solution.metadata["order_box_cuts"]
     assert cuts[0]["asked"] == [8, 8, 8, 8, 8]
     assert cuts[0]["why"] == "their fits took T_NS through zero"
+
+
+def test_a_summary_names_the_box_cut_and_why():
+    """The cut of the test above is named where the orders are printed, with its reason."""
+    from calibration.identifiability import box_cut_line, caution_lines
+    from tests.test_errors_in_variables import _weak_run
+
+    solution = solve_radiometric(_weak_run(0, vna_sigma=0.0).data)
+    line = box_cut_line(solution)
+    assert "(8, 8, 8, 8, 8) to" in line
+    assert "took T_NS through zero" in line
+    assert line in caution_lines(solution)
+    clean = solve_radiometric(simulate_run(SimulationConfig(channel_width_hz=97656.25), rng=0).data)
+    assert box_cut_line(clean) == ""
+    assert caution_lines(clean) == []

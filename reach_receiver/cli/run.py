@@ -33,7 +33,7 @@ from types import FrameType
 
 import numpy as np
 
-from calibration.identifiability import prior_dominated_line
+from calibration.identifiability import caution_lines
 from calibration.per_frequency import ChannelSolution
 from calibration.solvers import AnySolution, method_name
 from reach_receiver.clock import Clock
@@ -316,8 +316,8 @@ def _print_solution(solution: AnySolution) -> None:
     print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
     if solution.models_line():
         print(f"  averaged over models (orders, weight): {solution.models_line()}")
-    if prior_dominated_line(solution):
-        print(f"  {prior_dominated_line(solution)}")
+    for line in caution_lines(solution):
+        print(f"  {line}")
     print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
 
 
