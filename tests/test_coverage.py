@@ -81,34 +81,16 @@ def family():
     """The default solver over an ensemble of truths *and* set-ups: each run its own
     calibrators (the cold and hot loads and 2-10 others of REACH's), integration time
     (30 s to 1 h, log-uniform), VNA trace noise (1e-3, in half the runs) and truth (each
-    parameter 1-6 terms, each higher term 0.3-30 posterior sd of that set-up), drawn as the
-    model-choice benchmark's last ensemble draws them, at 205 channels. Per run: error /
-    floor, actual / predicted error and the calibration-only 68/95 % hits (8 channels)."""
-    from benchmarks.model_choice import Ensemble, draw_truth, pilot_sd
-    from calibration.errors import IllPosedError
-    from calibration.noise_floor import noise_floor
+    parameter 1-6 terms, each higher term 0.3-30 posterior sd of that set-up): the
+    model-choice benchmark's last ensemble, run by the benchmark's own loop, at 205
+    channels. Per run: error / floor, actual / predicted error and the calibration-only
+    68/95 % hits (8 channels); and how many runs the solver refused."""
+    from benchmarks.model_choice import Ensemble, run_ensemble
 
     ensemble = Ensemble("random truths and set-ups", channel_width_hz=WIDTH, setups="random")
-    rng = np.random.default_rng(2026)
-    ratios, honesty, hits, refused = [], [], [], 0
-    for _ in range(FAMILY_RUNS):
-        setup = ensemble.draw_setup(rng)
-        run = simulate_run(setup.config(draw_truth(setup, pilot_sd(setup), rng)), rng=rng)
-        data, source, truth = run.data, run.validation_noiseless, run.validation_temperature_k
-        try:
-            floor = noise_floor(data, source, run.truth.parameters).rms
-            solution = solve_radiometric(data)
-        except IllPosedError:  # four calibrators can leave T_NS undetermined: refused
-            refused += 1
-            continue
-        cal = solution.calibrate(data.freq_hz, data.gamma_rec, source,
-                                 gamma_rec_std=data.gamma_rec_std)
-        error = float(np.sqrt(np.mean((cal.mean - truth) ** 2)))
-        ratios.append(error / floor)
-        honesty.append(error / float(np.sqrt(np.mean(cal.std**2))))
-        channels = np.linspace(0, data.freq_hz.size - 1, 8).astype(int)
-        hits.append([float(np.mean(cal.covers(truth, level)[channels])) for level in (0.68, 0.95)])
-    return np.array(ratios), np.array(honesty), np.array(hits), refused
+    tally = run_ensemble(ensemble, FAMILY_RUNS, seed=2026, wanted={"averaged"})["averaged"]
+    return (np.array(tally.ratios), np.array(tally.honesty), np.array(tally.hits),
+            tally.failures)
 
 
 @pytest.mark.slow
