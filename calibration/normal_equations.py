@@ -36,7 +36,8 @@ warns of in its footnote to eq. 3.36). No ``n_channels x n_channels`` matrix is 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -134,6 +135,22 @@ def evaluate_coefficients(
     )
 
 
+class SubModels(Protocol):
+    """Which sub-models of the largest the data identify (all, where there is none).
+
+    :class:`calibration.errors_in_variables.Identified`: where the reflections' errors
+    decide some models, the box ``box`` holds only identified ones and ``admits`` says
+    whether a model beyond it is identified too.
+    """
+
+    @property
+    def box(self) -> Orders:
+        """The largest orders within which every model is identified."""
+
+    def admits(self, orders: Orders) -> bool:
+        """Whether the model ``orders`` is identified."""
+
+
 @dataclass(frozen=True)
 class NormalEquations:
     """Moments of a weighted linear model about a reference fit (see module docstring).
@@ -150,6 +167,8 @@ class NormalEquations:
         Number of data rows ``N`` (sources x channels).
     sum_log_weights
         ``sum log w``: the whitening Jacobian in the evidence.
+    identified
+        The sub-models the data identify, where not all are (:class:`SubModels`).
     """
 
     max_orders: Orders
@@ -159,6 +178,37 @@ class NormalEquations:
     reference: FloatArray
     n_rows: int
     sum_log_weights: float
+    identified: SubModels | None = None
+
+    def admits(self, orders: Sequence[int]) -> bool:
+        """Whether the data identify the sub-model ``orders`` (:attr:`identified`)."""
+        return self.identified is None or self.identified.admits(as_orders(orders))
+
+    def within(self, orders: Sequence[int]) -> NormalEquations:
+        """The same equations with a smaller largest model ``orders``.
+
+        Re-referenced at ``c_ref`` with the terms beyond ``orders`` removed (``e``)::
+
+            chi' = chi + 2 e^T g + e^T G e,   g' = (g + G e)[orders],   G' = G[orders]
+
+        so that every sub-model's quadratic form is unchanged.
+        """
+        idx = self.indices(orders)
+        beyond = self.reference.copy()
+        beyond[idx] = 0.0
+        moved = self.gram @ beyond
+        inside = self.identified is not None and all(
+            n <= m for n, m in zip(as_orders(orders), self.identified.box, strict=True)
+        )
+        return replace(
+            self,
+            max_orders=as_orders(orders),
+            gram=self.gram[np.ix_(idx, idx)],
+            cross=(self.cross + moved)[idx],
+            chi2_ref=float(self.chi2_ref + 2.0 * beyond @ self.cross + beyond @ moved),
+            reference=self.reference[idx],
+            identified=None if inside else self.identified,
+        )
 
     def indices(self, orders: Sequence[int]) -> NDArray[np.intp]:
         """Positions of a sub-model's coefficients in the ``max_orders`` layout."""

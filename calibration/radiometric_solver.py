@@ -39,9 +39,9 @@ model's own fit is within the noise of it, so the Gauss-Newton step from there i
 to second order in that difference (about 1e-8 of T_NS).
 
 Where the reflections' errors are known, the rows' dependence on them is taken out of
-the normal equations and the order box is cut to what the calibrators identify above
-them (:mod:`calibration.errors_in_variables`): few calibrators otherwise let the fit
-trade those errors' variance for a wrong model.
+the normal equations, and the search is kept to the models the calibrators identify
+above them (:mod:`calibration.errors_in_variables`): few calibrators otherwise let the
+fit trade those errors' variance for a wrong model.
 """
 
 from __future__ import annotations
@@ -61,6 +61,7 @@ from .data import CalibrationData
 from .errors import IllPosedError
 from .errors_in_variables import (
     MU_MAX,
+    Identified,
     corrected,
     error_moments,
     identified_orders,
@@ -269,25 +270,30 @@ def solve_radiometric(
     def build(largest: Orders) -> NormalEquations:
         """The normal equations at ``largest``, or within it.
 
-        At the largest orders within ``largest`` that the calibrators identify above their
-        reflections' errors, corrected for those errors' bias
-        (:mod:`calibration.errors_in_variables`).
+        Corrected for the reflections' errors' bias where those are known
+        (:mod:`calibration.errors_in_variables`). The operating point is fitted in the
+        largest box within ``largest`` that the calibrators identify above those errors;
+        the equations span ``largest``, and say which of its models beyond that box are
+        identified too (``identified``). Where even the largest models' fits take T_NS
+        through zero, ``largest`` itself loses its top terms.
         """
+        box = largest  # where the operating point is fitted
         while True:
             try:
-                normal = linearised(largest)
+                normal = linearised(box)
             except UndeterminedError:
                 # The largest models' fits take T_NS through zero (operating_point): the
                 # box's top terms are what the calibrators leave free; try without them.
-                top = max(largest)
+                top = max(box)
                 smallest = choice.min_orders
                 fewer = as_orders([
-                    n - (n == top and n > m) for n, m in zip(largest, smallest, strict=True)
+                    n - (n == top and n > m) for n, m in zip(box, smallest, strict=True)
                 ])
-                if fewer == largest:
+                if fewer == box:
                     raise
-                cuts.append((largest, fewer, "their fits took T_NS through zero"))
-                largest, last.problem = fewer, None
+                cuts.append((box, fewer, "their fits took T_NS through zero"))
+                largest = box = fewer
+                last.problem = None
                 continue
             last.error_gram = None
             if iterations == 0 or last.problem is None:
@@ -299,26 +305,34 @@ def solve_radiometric(
             )
             if errors is None:
                 return normal
-            weights, b = last.problem.weights, last.basis
-            moments = error_moments(errors, weights, b, largest)
+            weights = last.problem.weights
+            moments = error_moments(errors, weights, last.basis, box)
             fewer, mu = identified_orders(
-                normal.gram, moments.gram, largest, choice.min_orders, MU_MAX
+                normal.gram, moments.gram, box, choice.min_orders, MU_MAX
             )
-            if fewer != largest:  # restart at the smaller box from the thesis's start
-                cuts.append((largest, fewer, "the reflections' errors decided them"))
-                largest, last.problem = fewer, None
+            if fewer != box:  # restart at the smaller box from the thesis's start
+                cuts.append((box, fewer, "the reflections' errors decided them"))
+                box, last.problem = fewer, None
                 continue
             if mu > MU_MAX:
                 if allow_prior_dominated:
                     return normal
                 raise IllPosedError(
                     f"the calibrators {list(data.names)} do not identify a model with orders "
-                    f"{largest} above their reflections' errors: in one direction those "
+                    f"{box} above their reflections' errors: in one direction those "
                     f"errors carry {mu:.2f} of the apparent information (at most {MU_MAX}); "
                     "lower the orders, add calibrators or measure the reflections better"
                 )
+            identified = None
+            if box != largest:  # the same rows, over every model of the whole box
+                b = basis.matrix(data.freq_hz, max(largest))
+                normal = _normal_equations(last.problem, b, largest, ridge(largest), offset_var)
+                moments = error_moments(errors, weights, b, largest)
+                identified = Identified(box, normal.gram, moments.gram, largest)
+                last.basis, last.largest = b, largest
             last.error_gram = moments.gram
-            return corrected(normal, moments, errors, weights, b, theta)
+            fixed = corrected(normal, moments, errors, weights, last.basis, theta)
+            return replace(fixed, identified=identified)
 
     # Whether the largest model's fit keeps T_NS positive: only then may it join the
     # average as the smooth-function hypothesis (a model that takes T_NS through zero is

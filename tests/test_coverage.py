@@ -98,15 +98,15 @@ def test_an_ensemble_of_truths_and_set_ups_is_covered_at_the_nominal_rates(famil
     """Over 240 runs, each with its own calibrators, integration, VNA noise and truth, the
     68/95 % intervals cover within 4 and 2.5 points of the nominal rates (66.4-68.3 % and
     93.8-96.0 % over this and four other seeds of the family), the median run's error bars
-    are right in size (actual / predicted 0.96-0.97 there) and at most one run in a
-    hundred is more than ten times the floor off. That one remains: four calibrators that
-    identify fewer terms above their reflections' errors than the truth has (30 and 56
-    times the floor at two of the five seeds; the order box is cut below the truth's,
-    ``calibration.errors_in_variables``). Before the rows were corrected for those errors
-    such runs came out up to 235 times the floor off, and the RMS over runs of error / floor
-    was 8-20 where it is now 1.01-3.8 (1.01-1.10 at the three seeds without such a run;
-    the correction is tested in ``tests/test_errors_in_variables.py``). A few runs are
-    refused (four calibrators that leave T_NS undetermined), at most a tenth."""
+    are right in size (actual / predicted 0.96-0.97 there), the RMS over runs of error /
+    floor is within the issue's 1.10 (1.00-1.07 over the five seeds) and no run is ten
+    times the floor off (none beyond 3.2x there). Before the rows were corrected for the
+    reflections' errors (``calibration.errors_in_variables``) runs came out up to 235
+    times the floor off and the RMS was 8-20; with the correction but the search kept to
+    the box the calibrators identify whole, one run each at two of the five seeds (this
+    one among them) came out 30 and 56 times off, its truth beyond that box (RMS 2.2 and
+    3.75). A few runs are refused (four calibrators that leave T_NS undetermined), at
+    most a tenth."""
     ratios, honesty, hits, refused = family
     print(f"RMS error/floor {np.sqrt(np.mean(ratios**2)):.3f}, median actual/predicted "
           f"{np.median(honesty):.3f}, coverage {hits.mean(axis=0)}, refused {refused}, "
@@ -116,4 +116,5 @@ def test_an_ensemble_of_truths_and_set_ups_is_covered_at_the_nominal_rates(famil
     assert abs(hits[:, 1].mean() - 0.95) <= 0.025
     assert 0.9 <= np.median(honesty) <= 1.1
     assert np.median(ratios) <= 1.05
-    assert np.sum(ratios > 10) <= len(ratios) // 100
+    assert np.sqrt(np.mean(ratios**2)) <= 1.10
+    assert np.sum(ratios > 10) == 0
