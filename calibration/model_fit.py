@@ -334,10 +334,13 @@ def _fit_shrinkage(
         inside = [s for s in starts if all(n <= m for n, m in zip(s, hi, strict=True))]
         inside = inside or [significant_orders(inner, prior, lo, full)]
         result = search_orders_jointly(
-            log_evidence, lo, hi, starts=inside,
-            lookahead=choice.lookahead,
-            many=log_evidences,
+            log_evidence, lo, hi, starts=inside, lookahead=choice.lookahead, many=log_evidences,
         )
+        if log_evidence(full) > result.log_evidence:  # stalled below the box's top: from it
+            result = search_orders_jointly(
+                log_evidence, lo, hi, starts=[result.best, full], lookahead=choice.lookahead,
+                many=log_evidences,
+            )
         return result.best, result.table
 
     def settle(start: Orders, first: ParameterScales) -> tuple[float, ParameterScales, Orders]:
