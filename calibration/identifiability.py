@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from .conjugate import CoefficientPrior
 from .data import CalibrationData
 from .errors import IllPosedError
+from .errors_in_variables import MU_MAX
 from .noise_waves import INDEX, PARAMETERS
 from .shrinkage import ShrinkagePrior
 
@@ -202,22 +203,34 @@ def check_determined(
     return dominated
 
 
+#: ``metadata["order_box_cuts"]`` reasons: the box itself cut (the largest models' fits,
+#: and the evidence's, took T_NS through zero), or the box the reflections' errors leave
+#: whole, beyond which only identified models are searched.
+CUT_T_NS = "their fits took T_NS through zero"
+CUT_REFLECTIONS = "the reflections' errors decided them"
+
+
 def caution_lines(solution: Solution) -> list[str]:
     """What a summary must say beside the orders (those that apply).
 
-    :func:`prior_dominated_line` and :func:`box_cut_line`.
+    :func:`prior_dominated_line`, :func:`box_cut_line`, :func:`identified_line` and
+    :func:`uncorrected_line`.
     """
-    return [line for line in (prior_dominated_line(solution), box_cut_line(solution)) if line]
+    lines = (
+        prior_dominated_line(solution), box_cut_line(solution), identified_line(solution),
+        uncorrected_line(solution),
+    )
+    return [line for line in lines if line]
 
 
 def box_cut_line(solution: Solution) -> str:
-    """A note naming the order boxes the solver cut, and why (empty if none).
+    """A note naming the order box the solver cut, and why (empty if none).
 
-    The radiometric solver cuts its box where the calibrators do not determine the
-    largest models (``metadata["order_box_cuts"]``): structure beyond the kept box cannot
-    be represented, and its bias is not in the error bars.
+    The radiometric solver cuts its box where even the largest models' fits take T_NS
+    through zero (``metadata["order_box_cuts"]``, :data:`CUT_T_NS`): structure beyond the
+    kept box cannot be represented, and its bias is not in the error bars.
     """
-    cuts = solution.metadata.get("order_box_cuts") or []
+    cuts = [c for c in solution.metadata.get("order_box_cuts") or [] if c["why"] != CUT_REFLECTIONS]
     if not cuts:
         return ""
     reasons = "; ".join(dict.fromkeys(c["why"] for c in cuts))
@@ -225,6 +238,44 @@ def box_cut_line(solution: Solution) -> str:
         f"note: the calibrators do not determine the largest models; the order box was cut "
         f"from {tuple(cuts[0]['asked'])} to {tuple(cuts[-1]['kept'])} ({reasons}). "
         "Structure beyond it is not in the error bars"
+    )
+
+
+def identified_line(solution: Solution) -> str:
+    """A note where the reflections' errors leave some models of the box unidentified.
+
+    (:data:`CUT_REFLECTIONS`, :class:`calibration.errors_in_variables.Identified`.) Every
+    model within the kept box was searched, beyond it only those the calibrators identify
+    above their reflections' errors: structure only the others could hold is not in the
+    error bars. Empty if there is none.
+    """
+    cuts = [c for c in solution.metadata.get("order_box_cuts") or [] if c["why"] == CUT_REFLECTIONS]
+    if not cuts:
+        return ""
+    return (
+        f"note: above their reflections' errors the calibrators identify every model up to "
+        f"{tuple(cuts[-1]['kept'])}, not every model up to {tuple(cuts[0]['asked'])}; beyond "
+        "the first only identified models were searched. Structure only the others could "
+        "hold is not in the error bars"
+    )
+
+
+def uncorrected_line(solution: Solution) -> str:
+    """A warning where fixed orders the reflections' errors decide were solved anyway.
+
+    ``allow_prior_dominated`` lets fixed orders exceed what the calibrators identify above
+    their reflections' errors (``metadata["reflection_errors_uncorrected"]``, their share
+    ``mu``); those are solved without the errors' correction, whose bias the error bars
+    leave out. Empty if not so.
+    """
+    share = solution.metadata.get("reflection_errors_uncorrected")
+    if share is None:
+        return ""
+    return (
+        f"warning: the reflections' errors carry {float(share):.2f} of the apparent "
+        f"information in one direction of orders {solution.orders} (at most "
+        f"{MU_MAX}); solved without their correction, as asked. Their bias is not in the "
+        "error bars"
     )
 
 

@@ -68,6 +68,8 @@ from .errors_in_variables import (
     row_errors,
 )
 from .identifiability import (
+    CUT_REFLECTIONS,
+    CUT_T_NS,
     UndeterminedError,
     check_determined,
     require_matched_contrast,
@@ -153,6 +155,9 @@ class _LastRows:
     largest: Orders = ()  # type: ignore[assignment]
     #: ``C`` of :mod:`calibration.errors_in_variables` where the rows were corrected.
     error_gram: FloatArray | None = None
+    #: ``mu`` of fixed orders solved uncorrected although the reflections' errors decide
+    #: them (``allow_prior_dominated``).
+    uncorrected_share: float | None = None
 
 
 def _shared_errors(
@@ -278,6 +283,7 @@ def solve_radiometric(
         through zero, ``largest`` itself loses its top terms.
         """
         box = largest  # where the operating point is fitted
+        last.uncorrected_share = None
         while True:
             try:
                 normal = linearised(box)
@@ -291,7 +297,7 @@ def solve_radiometric(
                 ])
                 if fewer == box:
                     raise
-                cuts.append((box, fewer, "their fits took T_NS through zero"))
+                cuts.append((box, fewer, CUT_T_NS))
                 largest = box = fewer
                 last.problem = None
                 continue
@@ -311,11 +317,12 @@ def solve_radiometric(
                 normal.gram, moments.gram, box, choice.min_orders, MU_MAX
             )
             if fewer != box:  # restart at the smaller box from the thesis's start
-                cuts.append((box, fewer, "the reflections' errors decided them"))
+                cuts.append((box, fewer, CUT_REFLECTIONS))
                 box, last.problem = fewer, None
                 continue
             if mu > MU_MAX:
                 if allow_prior_dominated:
+                    last.uncorrected_share = mu
                     return normal
                 raise IllPosedError(
                     f"the calibrators {list(data.names)} do not identify a model with orders "
@@ -366,6 +373,8 @@ def solve_radiometric(
         metadata["order_box_cuts"] = [
             {"asked": list(a), "kept": list(b), "why": why} for a, b, why in cuts
         ]
+    if last.uncorrected_share is not None:
+        metadata["reflection_errors_uncorrected"] = round(last.uncorrected_share, 4)
     shared = data.reflection_correlation_channels
     excess = last.error_gram  # the corrected fit's own sandwich (errors_in_variables)
     if last.problem is not None and gamma_std is not None and shared > 1:

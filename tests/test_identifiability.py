@@ -194,3 +194,31 @@ def test_a_summary_names_the_box_cut_and_why():
     clean = solve_radiometric(simulate_run(SimulationConfig(channel_width_hz=97656.25), rng=0).data)
     assert box_cut_line(clean) == ""
     assert caution_lines(clean) == []
+
+
+def test_a_summary_says_where_the_reflections_errors_leave_models_unidentified():
+    """With VNA noise the same four calibrators identify every model of a smaller box and
+    some beyond it: the note names both boxes, not a cut (``identified_line``). Fixed orders
+    those errors decide, solved anyway with ``allow_prior_dominated``, are warned of with
+    their share of the information (``uncorrected_line``)."""
+    from calibration.identifiability import (
+        box_cut_line,
+        caution_lines,
+        identified_line,
+        uncorrected_line,
+    )
+    from tests.test_errors_in_variables import _weak_run
+
+    data = _weak_run(0).data
+    solution = solve_radiometric(data)
+    line = identified_line(solution)
+    assert "not every model up to (8, 8, 8, 8, 8)" in line
+    assert line in caution_lines(solution)
+    assert box_cut_line(solution) == uncorrected_line(solution) == ""
+    forced = solve_radiometric(
+        data, orders=OrderChoice.fixed((8, 8, 8, 8, 8)), allow_prior_dominated=True
+    )
+    assert forced.metadata["reflection_errors_uncorrected"] > 0.5
+    warning = uncorrected_line(forced)
+    assert warning.startswith("warning: the reflections' errors carry")
+    assert warning in caution_lines(forced)
