@@ -207,31 +207,36 @@ BEYOND_TRUTH = {
 }
 
 
-def test_a_truth_beyond_the_identified_box_is_found_in_most_runs():
+@pytest.mark.parametrize("seed", range(8))
+def test_a_truth_beyond_the_identified_box_is_found(seed):
     """Searched in the cut box alone, this truth was out of reach: in eight seeds of eight
-    the antenna came out 33-56 times the noise floor off, 4.5-8 times its error bars. With
-    the identified models beyond the box searched too, and the widths refitted until the
-    best model stays, five of eight come out within 2x the floor; the other three settle
-    on another model 9-15x off, their error bars short by at most 1.5x. Asserted: every
-    seed within 2x its error bars, and at least half within 2.5x the floor."""
-    close = 0
-    for seed in range(8):
-        config = SimulationConfig(
-            channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
-            calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
-            truth_coefficients=BEYOND_TRUTH,
-        )
-        run = simulate_run(config, rng=np.random.default_rng(seed))
-        data = run.data
-        floor = noise_floor(data, run.validation_noiseless, run.truth.parameters).rms
-        cal = solve_radiometric(data).calibrate(
+    the antenna came out 33-56 times the noise floor off, 4.5-8 times its error bars.
+    Searching the identified models beyond the box, with the widths refitted at each
+    climb's end until the best stays, the single best model is the truth's orders (or
+    one or two terms more) at 0.67-1.26x the floor, its error bars right (0.68-1.25x);
+    the average is 0.73-4.7x the floor, its error bars wider than its error (0.24-0.85x:
+    it mixes in models with an extra, poorly seen T_sin term)."""
+    config = SimulationConfig(
+        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
+        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
+        truth_coefficients=BEYOND_TRUTH,
+    )
+    run = simulate_run(config, rng=np.random.default_rng(seed))
+    data = run.data
+    floor = noise_floor(data, run.validation_noiseless, run.truth.parameters).rms
+    for average in (False, True):
+        cal = solve_radiometric(data, average=average).calibrate(
             data.freq_hz, data.gamma_rec, run.validation_noiseless,
             gamma_rec_std=data.gamma_rec_std,
         )
         error = float(np.sqrt(np.mean((cal.mean - run.validation_temperature_k) ** 2)))
-        assert error / float(np.sqrt(np.mean(cal.std**2))) < 2.0, seed
-        close += error / floor < 2.5
-    assert close >= 4
+        honesty = error / float(np.sqrt(np.mean(cal.std**2)))
+        if average:
+            assert error / floor < 6.0
+            assert honesty < 1.2
+        else:
+            assert error / floor < 1.6
+            assert 0.5 < honesty < 1.5
 
 
 def test_fixed_orders_the_calibrators_cannot_identify_are_refused():
