@@ -352,7 +352,7 @@ def _fit_shrinkage(
                 log_evidence, lo, hi, starts=[result.best, full], lookahead=choice.lookahead,
                 many=log_evidences,
             )
-        return result.best, result.table
+        return result.best, {m: z for m, z in result.table.items() if normal.admits(m)}
 
     def settle(
         start: Orders, first: ParameterScales, spread: Sequence[Orders]
