@@ -370,13 +370,21 @@ def _print_per_channel_errors(
     Where the calibrators' reflections line up (all real at one frequency, so T_cos and
     T_sin cannot be told apart there), a channel's floor is hundreds of times the band's
     median, and that one channel decides both RMS values of the line above. The RMS of
-    error / floor over the channels weighs each channel once.
+    error / floor over the channels weighs each channel once; it is taken over the
+    channels whose floor is within 10x the median, and the others' largest is shown
+    apart: there the floor, a first-order error, is not the error's size (one such
+    channel once took the RMS over 1229 channels from 1.02 to 1.17).
     """
     data, source = outcome.data, outcome.validation
     errors = sim.physics.calibration_errors_k(solution, data, source)
     floor = outcome.floor_std_k
-    worst = int(np.sum(floor > 10 * np.median(floor)))
-    print(
-        f"  per channel: RMS of error / floor {float(np.sqrt(np.mean((errors / floor) ** 2))):.3f}"
-        f" ({worst} channels with a floor over 10x the median)"
-    )
+    ratio = np.abs(errors / floor)
+    degenerate = floor > 10 * np.median(floor)
+    rms = float(np.sqrt(np.mean(ratio[~degenerate] ** 2)))
+    line = f"  per channel: RMS of error / floor {rms:.3f} over {int(np.sum(~degenerate))} channels"
+    if np.any(degenerate):
+        line += (
+            f"; {int(np.sum(degenerate))} with a floor over 10x the median, largest error / "
+            f"floor {float(np.max(ratio[degenerate])):.3f}"
+        )
+    print(line)
