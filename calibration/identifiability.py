@@ -28,7 +28,7 @@ width has had its variance reduced by the data less than a hundredfold.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -223,6 +223,12 @@ def caution_lines(solution: Solution) -> list[str]:
     return [line for line in lines if line]
 
 
+def _cuts(solution: Solution, reflections: bool) -> list[dict[str, Any]]:
+    """The solution's ``order_box_cuts`` made for the reflections' errors, or the others."""
+    cuts = solution.metadata.get("order_box_cuts") or []
+    return [c for c in cuts if (c["why"] == CUT_REFLECTIONS) == reflections]
+
+
 def box_cut_line(solution: Solution) -> str:
     """A note naming the order box the solver cut, and why (empty if none).
 
@@ -230,7 +236,7 @@ def box_cut_line(solution: Solution) -> str:
     through zero (``metadata["order_box_cuts"]``, :data:`CUT_T_NS`): structure beyond the
     kept box cannot be represented, and its bias is not in the error bars.
     """
-    cuts = [c for c in solution.metadata.get("order_box_cuts") or [] if c["why"] != CUT_REFLECTIONS]
+    cuts = _cuts(solution, reflections=False)
     if not cuts:
         return ""
     reasons = "; ".join(dict.fromkeys(c["why"] for c in cuts))
@@ -249,7 +255,7 @@ def identified_line(solution: Solution) -> str:
     above their reflections' errors: structure only the others could hold is not in the
     error bars. Empty if there is none.
     """
-    cuts = [c for c in solution.metadata.get("order_box_cuts") or [] if c["why"] == CUT_REFLECTIONS]
+    cuts = _cuts(solution, reflections=True)
     if not cuts:
         return ""
     return (
