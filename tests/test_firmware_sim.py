@@ -128,9 +128,10 @@ def test_safe_keeps_fan_and_24v(sim: FirmwareTeensy, port: serial.Serial) -> Non
         assert ask(port, line).startswith("OK 00")
     reply = ask(port, "#s safe")
     assert reply.startswith("OK 00 #s ms1=0 ms2=0 ms3=0 ms4=0 mts=lna 6v=0 12v=0 24v=1 ns=0 fan=1")
-    state = sim.wait_for_state(
-        lambda s: s.get("12v") == "0" and s.get("fan") == "1", REPLY_TIMEOUT_S
-    )
+    # PINS lines lag the replies: wait for the one that counts the safe's own changes, since
+    # an earlier line (after "rail fan on") already looked like the safe state.
+    changes = parse_pins(reply.removeprefix("OK 00 #s "))["changes"]
+    state = sim.wait_for_state(lambda s: s.get("changes") == changes, REPLY_TIMEOUT_S)
     assert only_state(state) == {**POWER_ON, "24v": "1", "fan": "1"}
 
 
@@ -168,8 +169,10 @@ def test_deadman_trips_in_real_time_and_reports_once(
         assert ask(port, line).startswith("OK 00")
     assert ask(port, "#d deadman 200") == "OK 00 #d deadman=200"
     assert parse_pins(ask(port, "state").removeprefix("OK 00 "))["changes"] == "4"
-    # The simulator goes safe on its own (a PINS line), with nobody asking.
-    state = sim.wait_for_state(lambda s: s.get("12v") == "0", 10 * 0.2)
+    # The simulator goes safe on its own (a PINS line), with nobody asking. The trip's line is
+    # the first past the host's four changes: an earlier line, still unread when the replies
+    # came back, also has 12v=0.
+    state = sim.wait_for_state(lambda s: int(s.get("changes", "0")) > 4, 10 * 0.2)
     assert only_state(state) == {**POWER_ON, "24v": "1", "fan": "1"}
     assert (state["changes"], state["deadman"]) == ("6", "0")
     expected = "dead-man tripped after 200 ms without the host; front-end safe"
