@@ -55,8 +55,11 @@ def test_frontend_connect_sets_the_pins_the_simulator_sees(teensy, board):
     assert state.switches["ms1"] == 7
     assert state.switches["ms3"] == 3
     assert state.switches["mts"] == "vna"
-    pins = board.wait_for_state(lambda s: s.get("ms2") == "1", timeout_s=2.0)
-    assert (pins["ms1"], pins["ms3"], pins["mts"]) == ("7", "3", "vna")
+    # PINS lines lag the replies, one per change: wait for the line that counts them all.
+    pins = board.wait_for_state(
+        lambda s: s.get("changes") == str(state.changes), timeout_s=2.0
+    )
+    assert (pins["ms1"], pins["ms2"], pins["ms3"], pins["mts"]) == ("7", "1", "3", "vna")
 
 
 def test_interlocks_refused_by_the_board_change_nothing(teensy):
