@@ -191,12 +191,16 @@ def join_hypotheses(
     weight are kept, at most :data:`MAX_COMPONENTS`.
     """
     log_w = np.asarray(other_log_weights, dtype=float)
-    top = max(float(np.max(log_w)), log_z_mixture)
-    w_other = np.exp(log_w - top)
-    order = np.argsort(-w_other)
-    cumulative = np.cumsum(w_other[order]) / np.sum(w_other)
+    # Which further components carry MASS of their own weight, from their own largest: a
+    # hypothesis hundreds of nats behind the mixture would underflow to 0 / 0 against it.
+    own = np.exp(log_w - np.max(log_w))
+    order = np.argsort(-own)
+    cumulative = np.cumsum(own[order]) / np.sum(own)
     kept = order[: int(np.searchsorted(cumulative, MASS)) + 1][:MAX_COMPONENTS]
-    weights = np.concatenate([mixture.weights * np.exp(log_z_mixture - top), w_other[kept]])
+    top = max(float(np.max(log_w)), log_z_mixture)
+    w_other = np.exp(log_w[kept] - top)
+    kept, w_other = kept[w_other > 0], w_other[w_other > 0]  # none that weigh nothing
+    weights = np.concatenate([mixture.weights * np.exp(log_z_mixture - top), w_other])
     return mixture_of(
         [*mixture.components, *(others[i] for i in kept)],
         weights / weights.sum(),
