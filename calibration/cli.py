@@ -57,7 +57,7 @@ from .hdf5_io import (
     write_run,
     write_solution,
 )
-from .identifiability import caution_lines
+from .identifiability import caution_lines, model_choice_line
 from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .per_frequency import ChannelSolution
 from .polynomial_model import coefficient_slices
@@ -240,6 +240,9 @@ def cmd_apply(args: argparse.Namespace) -> int:
     )
     if systematics:
         print(f"VNA systematic: {systematics.describe()}")
+    choice = model_choice_line(spectrum.model_choice_share, args.source)
+    if choice:
+        print(choice)
     for path in (args.output, args.csv):
         if path:
             print(f"wrote {path}")

@@ -573,11 +573,16 @@ def write_calibrated(
     model-averaged solution the mixture's quantiles, which the stds alone do not give.
     With the VNA's systematic error attached, ``std_systematic`` and its Monte-Carlo
     draws (``systematic_draws``, deviations from ``mean``) go beside them.
+    ``std_model_choice`` is the part of ``std_calibration`` that is the choice of model
+    (zero for one model), ``model_choice_share`` its share of the calibration variance.
     """
     with _atomic_h5(path, CALIBRATED_FORMAT) as f:
-        f.attrs.update({**dict(attrs or {}), "source": source, "dof": float(spectrum.dof)})
+        f.attrs.update({
+            **dict(attrs or {}), "source": source, "dof": float(spectrum.dof),
+            "model_choice_share": spectrum.model_choice_share,
+        })
         _dataset(f, "frequencies", spectrum.freq_hz, "Hz")
-        for name in ("mean", "std", "std_calibration", "std_measurement"):
+        for name in ("mean", "std", "std_calibration", "std_measurement", "std_model_choice"):
             _dataset(f, name, getattr(spectrum, name), "K")
         for name, values in spectrum.intervals().items():
             _dataset(f, name, values, "K").attrs["description"] = INTERVAL_DESCRIPTION

@@ -81,6 +81,15 @@ class ChannelMixture:
             active = active[~done]
         return x
 
+    def between_variance(self) -> FloatArray:
+        """The spread of the components' means, ``sum_m w_m (mu_mi - mu_i)^2`` ``(N,)``.
+
+        The part of the mixture's variance that is the choice of model: the rest,
+        ``sum_m w_m s_mi^2`` (``variances``), each model's own (the law of total variance).
+        """
+        centre = self.weights @ self.means
+        return np.asarray(self.weights @ (self.means - centre[None, :]) ** 2)
+
     def _scales(self, extra_variance: FloatArray) -> FloatArray:
         """Each component's Student-t scale with the extra variance joined: ``(M, N)``."""
         total = self.variances + np.asarray(extra_variance)[None, :]

@@ -88,6 +88,31 @@ class CalibratedSpectrum:
         """Total predictive standard deviation per channel."""
         return np.sqrt(self.std_calibration**2 + self.std_measurement**2 + self.std_systematic**2)
 
+    @property
+    def std_model_choice(self) -> FloatArray:
+        """The part of ``std_calibration`` that is the choice of model, per channel (K).
+
+        The spread of the averaged models' spectra about their mean
+        (:meth:`ChannelMixture.between_variance
+        <calibration.mixture_interval.ChannelMixture.between_variance>`), whose square
+        with the models' own variances makes ``std_calibration**2``; 0 for one model.
+        """
+        if self.mixture is None:
+            return np.zeros_like(self.mean)
+        return np.sqrt(self.mixture().between_variance())
+
+    @property
+    def model_choice_share(self) -> float:
+        """The share of the calibration variance that is the choice of model.
+
+        :attr:`std_model_choice` squared over ``std_calibration`` squared, summed over
+        channels.
+        """
+        total = float(np.sum(self.std_calibration**2))
+        if total == 0.0:
+            return 0.0
+        return min(float(np.sum(self.std_model_choice**2)) / total, 1.0)
+
     def interval(
         self, level: float = 0.68, calibration_only: bool = False
     ) -> tuple[FloatArray, FloatArray]:

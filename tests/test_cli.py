@@ -52,11 +52,17 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
     assert main(["apply", str(sol), str(run), "-o", str(out), "--csv", str(csv)]) == 0
     text = capsys.readouterr().out
     assert "RMS std" in text
+    assert "averaged models disagree" not in text  # twelve calibrators decide the model
     with h5py.File(out, "r") as f:
         assert f.attrs["source"] == "ant"
         np.testing.assert_array_equal(f["frequencies"][()], data.freq_hz)
         std, cal, meas = (f[k][()] for k in ("std", "std_calibration", "std_measurement"))
         np.testing.assert_allclose(std**2, cal**2 + meas**2, rtol=1e-12)
+        choice = f["std_model_choice"][()]
+        assert np.all(choice <= cal * (1 + 1e-9))
+        share = np.sum(choice**2) / np.sum(cal**2)
+        assert f.attrs["model_choice_share"] == pytest.approx(share, rel=1e-9, abs=1e-15)
+        assert f.attrs["model_choice_share"] < 0.5
         mean = f["mean"][()]
         lo68, hi68, lo95, hi95 = (
             f[k][()] for k in ("lower_68", "upper_68", "lower_95", "upper_95")

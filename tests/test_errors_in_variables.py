@@ -15,6 +15,7 @@ from calibration.errors_in_variables import (
     row_errors,
     unidentified_share,
 )
+from calibration.identifiability import CHOICE_SHARE
 from calibration.model_fit import OrderChoice
 from calibration.noise_floor import noise_floor
 from calibration.noise_waves import design_terms
@@ -243,6 +244,8 @@ def test_a_truth_beyond_the_identified_box_is_found(seed):
         if average:
             assert error / floor < 6.0
             assert honesty < 1.2
+            if error / floor > 2.0:  # seeds 0 and 6: the summary says the models disagree
+                assert cal.model_choice_share >= CHOICE_SHARE
         else:
             assert error / floor < 1.6
             assert 0.5 < honesty < 1.5

@@ -222,3 +222,44 @@ def test_a_summary_says_where_the_reflections_errors_leave_models_unidentified()
     warning = uncorrected_line(forced)
     assert warning.startswith("warning: the reflections' errors carry")
     assert warning in caution_lines(forced)
+
+
+def test_a_source_the_averaged_models_disagree_on_is_noted(tmp_path, capsys):
+    """Four calibrators with VNA noise, the truth beyond the identified box (seed 6): the
+    models that trade T_cos's structure into T_sin fit as well and calibrate the antenna
+    4-17x the floor apart, and their spread is most of its calibration variance (0.81;
+    0.39-0.83 over the eight seeds of the test in test_errors_in_variables). ``reach-cal
+    apply`` says so; twelve calibrators (0.004-0.006) do not."""
+    from calibration.cli import main
+    from calibration.hdf5_io import write_run, write_solution
+    from calibration.identifiability import CHOICE_SHARE, model_choice_line
+    from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
+    from tests.test_errors_in_variables import BEYOND_TRUTH, VNA_SIGMA
+
+    config = SimulationConfig(
+        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
+        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
+        truth_coefficients=BEYOND_TRUTH,
+    )
+    run = simulate_run(config, rng=np.random.default_rng(6))
+    data = run.data
+    solution = solve_radiometric(data)
+    spectrum = solution.calibrate(
+        data.freq_hz, data.gamma_rec, run.validation, data.channel_width_hz, data.gamma_rec_std
+    )
+    assert spectrum.model_choice_share > CHOICE_SHARE
+    assert model_choice_line(spectrum.model_choice_share, "ant").startswith(
+        "note: on 'ant' the averaged models disagree"
+    )
+    run_file, solution_file = tmp_path / "run.h5", tmp_path / "solution.h5"
+    write_run(run_file, data, {run.validation.name: run.validation})
+    write_solution(solution_file, solution)
+    assert main(["apply", str(solution_file), str(run_file)]) == 0
+    assert "the averaged models disagree" in capsys.readouterr().out
+
+    twelve = simulate_run(SimulationConfig(channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ), rng=0)
+    spectrum = solve_radiometric(twelve.data).calibrate(
+        twelve.data.freq_hz, twelve.data.gamma_rec, twelve.validation
+    )
+    assert spectrum.model_choice_share < 0.05
+    assert model_choice_line(spectrum.model_choice_share, "ant") == ""

@@ -111,6 +111,25 @@ def test_an_averaged_solutions_interval_is_its_samples_quantiles():
     lo, hi = cal.interval(0.68)  # the radiometer noise joins every component
     lo_cal, hi_cal = cal.interval(0.68, calibration_only=True)
     assert np.all(hi - lo > hi_cal - lo_cal)
+    # The law of total variance: the posterior's moments (std_calibration) are the spread
+    # of the models' means plus their own variances, channel by channel.
+    mixture = cal.mixture()
+    between = mixture.between_variance()
+    np.testing.assert_allclose(
+        cal.std_calibration**2, between + mixture.weights @ mixture.variances, rtol=1e-6
+    )
+    assert cal.model_choice_share == pytest.approx(
+        np.sum(between) / np.sum(cal.std_calibration**2), rel=1e-12
+    )
+    assert 0.0 < cal.model_choice_share < 1.0
+
+
+def test_the_spread_between_models_is_the_variance_of_their_means():
+    mixture = ChannelMixture(
+        np.array([0.25, 0.75]), np.array([[0.0, 1.0], [4.0, 1.0]]),
+        np.array([[1.0, 2.0], [3.0, 4.0]]), np.array([np.inf, 5.0]),
+    )
+    np.testing.assert_allclose(mixture.between_variance(), [3.0, 0.0], rtol=0, atol=1e-15)
 
 
 def test_one_models_interval_is_its_student_t():

@@ -33,7 +33,7 @@ from types import FrameType
 
 import numpy as np
 
-from calibration.identifiability import caution_lines
+from calibration.identifiability import caution_lines, model_choice_line
 from calibration.per_frequency import ChannelSolution
 from calibration.solvers import AnySolution, method_name
 from reach_receiver.clock import Clock
@@ -344,6 +344,9 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
         f"  on {outcome.validation.name!r}: noise floor {1e3 * floor:.3f} mK, predicted "
         f"calibration std {1e3 * predicted:.3f} mK, distance to floor {predicted / floor:.3f}"
     )
+    choice = model_choice_line(outcome.model_choice_share, outcome.validation.name)
+    if choice:
+        print(f"  {choice}")
     if outcome.systematics is not None and outcome.systematic_k is not None:
         # The median beside the RMS: one channel where the calibrators' reflections line up
         # can hold most of the RMS.

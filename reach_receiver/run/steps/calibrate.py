@@ -96,6 +96,8 @@ class CalibrationOutcome:
     floor_std_k: FloatArray
     predicted_k: float
     systematics: ReflectionSystematics | None = None
+    #: :attr:`CalibratedSpectrum.model_choice_share` of the validation source.
+    model_choice_share: float = 0.0
 
     @property
     def floor_k(self) -> float:
@@ -167,6 +169,7 @@ def calibrate(
         handover=handover,
         floor_std_k=solution_noise_floor(solution, data, validation).std,
         predicted_k=float(np.sqrt(np.mean(spectrum.std_calibration**2 + reflections))),
+        model_choice_share=spectrum.model_choice_share,
         systematics=(
             reflection_systematics(
                 data, {validation.name: validation}, refit(solution), 0, vna_draws
