@@ -312,8 +312,8 @@ def model_choice_line(share: float, source: str) -> str:
     error bars; the average's error bars hold that spread, the single best model's do not.
     Measured over 960 runs of random set-ups and truths (the suite's family at 205
     channels, seeds 5, 6, 9 and 2026): the three runs above :data:`CHOICE_SHARE` were 2.5,
-    4.6 and 6.0 times the noise floor off, two of them their seed's farthest, inside their
-    error bars (actual / predicted 0.66-1.43); the 724 runs below 0.1 were 1.04-1.10 RMS
+    4.6 and 6.0 times the noise floor off, two of them their seed's farthest (actual /
+    predicted error 0.66, 1.43 and 0.70); the 724 runs below 0.1 were 1.04-1.10 RMS
     a seed. Empty below it.
     """
     if share < CHOICE_SHARE:
