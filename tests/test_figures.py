@@ -14,10 +14,11 @@ from scipy import stats
 from calibration import figures
 from calibration.conjugate import LinearPosterior
 from calibration.figures.parameters import evidence_profile, parameter_bands
+from calibration.figures.sources import SHOWN_CHOICE_SHARE
 from calibration.figures.style import DPI, WIDTH_IN
 from calibration.radiometric_solver import solve_radiometric
 from calibration.run_records import TemperatureLog
-from calibration.simulate import SimulationConfig, simulate_run
+from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 #: 201 channels and six calibrators: every figure in about a second.
 CONFIG = SimulationConfig(
@@ -135,6 +136,38 @@ def test_calibrated_sources(run, solution, tmp_path):
     assert_drawn(fig, tmp_path / "sources.png")
     assert "cold:" in texts(fig)
     assert "ant: calibrated T (no reference)" in texts(fig)
+    # The models' spread is drawn where it is a visible share of a source's error bars.
+    shown = any(spectra[n].model_choice_share >= SHOWN_CHOICE_SHARE for n in references)
+    assert ("of which the choice of model" in texts(fig)) == shown
+
+
+def test_calibrated_sources_show_where_the_models_disagree(tmp_path):
+    """Four calibrators, VNA noise, the truth beyond the identified box (seed 6): the
+    antenna's calibration error is mostly the spread between the averaged models (0.81 of
+    its variance), drawn as its own curve inside the calibration's and named in the
+    legend."""
+    from tests.test_errors_in_variables import BEYOND_TRUTH, VNA_SIGMA
+
+    config = SimulationConfig(
+        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
+        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
+        truth_coefficients=BEYOND_TRUTH,
+    )
+    weak = simulate_run(config, rng=np.random.default_rng(6))
+    data = weak.data
+    solution = solve_radiometric(data)
+    spectra = {
+        name: solution.calibrate(
+            data.freq_hz, data.gamma_rec, src, data.channel_width_hz, data.gamma_rec_std
+        )
+        for name, src in {**data.sources, "ant": weak.validation}.items()
+    }
+    references = {name: src.temperature_k for name, src in data.sources.items()}
+    references["ant"] = weak.validation_temperature_k
+    fig = figures.calibrated_sources(spectra, references)
+    assert_drawn(fig, tmp_path / "sources_weak.png")
+    assert "of which the choice of model" in texts(fig)
+    assert spectra["ant"].model_choice_share > 0.5
 
 
 def test_reflections(run, tmp_path):

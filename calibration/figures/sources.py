@@ -3,9 +3,11 @@
 Each panel is one source calibrated with the solution: its residual (calibrated minus
 known temperature, K) per channel and binned, against the predicted ±1 sigma of its own
 radiometer noise (``CalibratedSpectrum.std_measurement``, shaded) and of the calibration
-(``std_calibration``, dashed). A source without a known temperature (an antenna) shows its
-calibrated temperature with its total ±1 sigma instead. The title gives the residual's RMS
-over the RMS of the predicted total sigma: about 1 when the error bars are honest.
+(``std_calibration``, dashed), and where the averaged models disagree the part of the
+latter that is their spread (``std_model_choice``, dotted). A source without a known
+temperature (an antenna) shows its calibrated temperature with its total ±1 sigma instead.
+The title gives the residual's RMS over the RMS of the predicted total sigma: about 1 when
+the error bars are honest.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ FloatArray = NDArray[np.float64]
 
 #: Bins of the binned residual across the band.
 BINS = 48
+#: A source's spread between the averaged models is drawn where it is at least this share
+#: of its calibration variance (:attr:`CalibratedSpectrum.model_choice_share`).
+SHOWN_CHOICE_SHARE = 0.05
 #: Panel titles: normal weight, to fit a quarter of the width.
 TITLE: dict[str, Any] = {"fontsize": 10, "fontweight": "normal"}
 
@@ -69,6 +74,9 @@ def _residual_panel(
                 label="radiometer noise ±1σ" if sign > 0 else None)
         ax.plot(*envelope(x, sign * cal, pixels), color="k", ls="--", lw=0.9,
                 label="calibration ±1σ" if sign > 0 else None)
+        if spectrum.model_choice_share >= SHOWN_CHOICE_SHARE:
+            ax.plot(*envelope(x, sign * spectrum.std_model_choice, pixels), color="C3",
+                    ls=":", lw=1.5, label="of which the choice of model" if sign > 0 else None)
     ratio = rms(residual) / rms(spectrum.std)
     ax.set_title(f"{name}: {rms(residual) * 1e3:.3g} mK RMS = {ratio:.2f} σ", **TITLE)
     limit = 4 * max(float(np.max(meas)), float(np.max(np.abs(by))), 1e-9)
@@ -120,8 +128,11 @@ def calibrated_sources(
         ax.set_xlabel("frequency (MHz)")
     with_reference = [ax for ax, name in zip(axes, spectra, strict=True) if name in references]
     if with_reference:
-        handles, labels = with_reference[0].get_legend_handles_labels()
-        legend_below(fig, handles, labels, columns=len(labels))
+        entries: dict[str, Any] = {}  # every panel's, once: the choice of model is not in all
+        for ax in with_reference:
+            for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+                entries.setdefault(label, handle)
+        legend_below(fig, list(entries.values()), list(entries), columns=len(entries))
     suptitle(
         fig, "Calibrated sources: residual against the known temperature, and the predicted noise"
     )
