@@ -191,7 +191,9 @@ class NormalEquations:
 
             chi' = chi + 2 e^T g + e^T G e,   g' = (g + G e)[orders],   G' = G[orders]
 
-        so that every sub-model's quadratic form is unchanged.
+        so that every sub-model's quadratic form is unchanged. ``identified`` is dropped
+        where ``orders`` lies within its box (every model is then identified) and kept
+        otherwise: it holds its own moments in its own layout, so it answers for any model.
         """
         idx = self.indices(orders)
         beyond = self.reference.copy()
