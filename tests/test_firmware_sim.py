@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import select
 import subprocess
+import threading
 import tty
 from collections.abc import Iterator
 from pathlib import Path
@@ -228,3 +229,29 @@ def _read_exactly(fd: int, size: int) -> bytes:
         assert ready, f"only {data!r} arrived"
         data += os.read(fd, size - len(data))
     return data
+
+
+def test_a_restart_while_instruments_sync_sees_its_terminal(sim: FirmwareTeensy) -> None:
+    """The simulated instruments call ``sync()`` from their own threads, all the time. One
+    that caught a restarted program before its output was non-blocking read its first
+    lines and then blocked, holding the read lock: ``start()`` saw no PTY line for 10 s
+    (CI, the monitor's unplug test). Each restart here has a thread syncing throughout."""
+    stop = threading.Event()
+
+    def syncing() -> None:
+        while not stop.is_set():
+            sim.sync()
+
+    sim.start_timeout_s = 3.0
+    for _ in range(20):
+        sim.close()
+        worker = threading.Thread(target=syncing)
+        worker.start()
+        try:
+            sim.start()
+            with serial.Serial(sim.port, timeout=REPLY_TIMEOUT_S) as link:
+                assert ask(link, "#r ping") == "OK 00 #r pong"
+        finally:
+            stop.set()
+            worker.join()
+            stop.clear()

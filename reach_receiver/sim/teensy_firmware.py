@@ -193,7 +193,7 @@ class FirmwareTeensy:
         if self.uart1 is not None:
             args += ["--uart1", self.uart1]
         try:
-            self._proc = subprocess.Popen(
+            proc = subprocess.Popen(
                 args,
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
@@ -206,6 +206,12 @@ class FirmwareTeensy:
             )
         except OSError as err:
             raise ReceiverError(f"{DEVICE}: cannot start {binary}: {err}") from err
+        # Non-blocking before any thread can see the program: sync() from a simulated
+        # instrument's thread may read it first, and a blocking read after the first lines
+        # held the read lock until the program's end (a restart then saw no PTY line).
+        assert proc.stdout is not None
+        os.set_blocking(proc.stdout.fileno(), False)
+        self._proc = proc
         self._reader = threading.Thread(target=self._read_output, name=DEVICE, daemon=True)
         self._reader.start()
         ready = self._started.wait(self.start_timeout_s) and self._port is not None
@@ -340,8 +346,7 @@ class FirmwareTeensy:
         proc = self._proc
         if proc is None or proc.stdout is None:
             return
-        fd = proc.stdout.fileno()
-        os.set_blocking(fd, False)
+        fd = proc.stdout.fileno()  # non-blocking since start()
         # Only while this is the current program: a reader that outlives close() (its join
         # timed out on a busy machine) must not touch the next program's state: its end of
         # file or its wake-up would end the next start() before that program's PTY line.
