@@ -208,6 +208,17 @@ BEYOND_TRUTH = {
 }
 
 
+def beyond_run(seed: int):
+    """:data:`BEYOND_TRUTH` seen by its four calibrators (cold, hot, c2r27, c2r69), 105 s a
+    position, VNA noise, 205 channels."""
+    config = SimulationConfig(
+        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
+        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
+        truth_coefficients=BEYOND_TRUTH,
+    )
+    return simulate_run(config, rng=np.random.default_rng(seed))
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_a_truth_beyond_the_identified_box_is_found(seed):
     """Searched in the cut box alone, this truth was out of reach: in eight seeds of eight
@@ -226,12 +237,7 @@ def test_a_truth_beyond_the_identified_box_is_found(seed):
     Solved alone over the eight seeds, (1, 6, 4, 5, 3) and (1, 6, 5, 5, 3) are 1-10x the
     floor with error bars right on average (actual / predicted RMS 0.92, 1.04; (1, 7, 4,
     5, 3) 1.54), so the width is mostly the choice's real uncertainty."""
-    config = SimulationConfig(
-        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
-        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
-        truth_coefficients=BEYOND_TRUTH,
-    )
-    run = simulate_run(config, rng=np.random.default_rng(seed))
+    run = beyond_run(seed)
     data = run.data
     floor = noise_floor(data, run.validation_noiseless, run.truth.parameters).rms
     for average in (False, True):

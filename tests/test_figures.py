@@ -18,7 +18,7 @@ from calibration.figures.sources import SHOWN_CHOICE_SHARE
 from calibration.figures.style import DPI, WIDTH_IN
 from calibration.radiometric_solver import solve_radiometric
 from calibration.run_records import TemperatureLog
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.simulate import SimulationConfig, simulate_run
 
 #: 201 channels and six calibrators: every figure in about a second.
 CONFIG = SimulationConfig(
@@ -146,14 +146,9 @@ def test_calibrated_sources_show_where_the_models_disagree(tmp_path):
     antenna's calibration error is mostly the spread between the averaged models (0.81 of
     its variance), drawn as its own curve inside the calibration's and named in the
     legend."""
-    from tests.test_errors_in_variables import BEYOND_TRUTH, VNA_SIGMA
+    from tests.test_errors_in_variables import beyond_run
 
-    config = SimulationConfig(
-        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
-        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
-        truth_coefficients=BEYOND_TRUTH,
-    )
-    weak = simulate_run(config, rng=np.random.default_rng(6))
+    weak = beyond_run(6)
     data = weak.data
     solution = solve_radiometric(data)
     spectra = {

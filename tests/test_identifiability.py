@@ -234,14 +234,9 @@ def test_a_source_the_averaged_models_disagree_on_is_noted(tmp_path, capsys):
     from calibration.hdf5_io import write_run, write_solution
     from calibration.identifiability import CHOICE_SHARE, model_choice_line
     from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
-    from tests.test_errors_in_variables import BEYOND_TRUTH, VNA_SIGMA
+    from tests.test_errors_in_variables import beyond_run
 
-    config = SimulationConfig(
-        channel_width_hz=32 * ITPM_CHANNEL_WIDTH_HZ, integration_s=105.0,
-        calibrators=("cold", "hot", "c2r27", "c2r69"), vna_sigma=VNA_SIGMA,
-        truth_coefficients=BEYOND_TRUTH,
-    )
-    run = simulate_run(config, rng=np.random.default_rng(6))
+    run = beyond_run(6)
     data = run.data
     solution = solve_radiometric(data)
     spectrum = solution.calibrate(
