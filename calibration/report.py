@@ -11,7 +11,9 @@ into a directory:
 * ``summary.md`` and ``summary.html``: the orders (the best and the leading averaged
   models with their weights), the noise scale, each source's residual against its noise,
   the distance of each non-calibrator (the antenna) to the radiometer noise floor
-  (:mod:`calibration.noise_floor`) and, for a simulated run, its actual error; the checks
+  (:mod:`calibration.noise_floor`), the share of its calibration variance that is the
+  choice of model (:attr:`~calibration.solution.CalibratedSpectrum.model_choice_share`)
+  and, for a simulated run, its actual error; the checks
   (prior-dominated parameters, orders at the search's ceiling, the run's own checks,
   alarms and events) and the software versions.
 
@@ -265,7 +267,10 @@ def _floor_rows(inputs: ReportInputs, calibrated: Calibrated) -> list[tuple[str,
                 source.q,
             )
             actual = _mk(_rms(calibrated.spectra[name].mean - true_t))
-        rows.append((name, _mk(floor), _mk(predicted), f"{predicted / floor:.4f}", actual))
+        share = calibrated.spectra[name].model_choice_share
+        rows.append(
+            (name, _mk(floor), _mk(predicted), f"{share:.3f}", f"{predicted / floor:.4f}", actual)
+        )
     return rows
 
 
@@ -301,6 +306,7 @@ def summary_sections(inputs: ReportInputs, calibrated: Calibrated) -> list[Secti
             Section(
                 "Distance to the radiometer noise floor (RMS over channels)",
                 ("source", "floor (mK)", "predicted calibration sigma (mK)",
+                 "its variance's share from the choice of model",
                  "distance (predicted / floor)", "actual error vs truth (mK)"),
                 _floor_rows(inputs, calibrated),
             )

@@ -114,8 +114,10 @@ def test_source_and_floor_numbers_equal_a_recomputation(files, report):
         assert float(calibration) == pytest.approx(1e3 * rms(spectrum.std_calibration), rel=1e-3)
         assert float(ratio) == pytest.approx(rms(error) / rms(spectrum.std), rel=1e-3)
         assert 0.7 < float(ratio) < 1.3  # honest noise model, in-sample
-    ((name, floor, predicted, distance, actual),) = section(parsed, "Distance")
+    ((name, floor, predicted, share, distance, actual),) = section(parsed, "Distance")
     assert name == "ant"
+    antenna = solution.calibrate(data.freq_hz, data.gamma_rec, others["ant"])
+    assert float(share) == pytest.approx(antenna.model_choice_share, abs=5e-4)
     expected = noise_floor(data, others["ant"], solution.parameters).rms
     assert float(floor) == pytest.approx(1e3 * expected, rel=1e-3)
     assert float(distance) == pytest.approx(float(predicted) / float(floor), rel=2e-3)
