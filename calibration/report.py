@@ -306,7 +306,7 @@ def summary_sections(inputs: ReportInputs, calibrated: Calibrated) -> list[Secti
             Section(
                 "Distance to the radiometer noise floor (RMS over channels)",
                 ("source", "floor (mK)", "predicted calibration sigma (mK)",
-                 "its variance's share from the choice of model",
+                 "choice of model (share of that variance)",
                  "distance (predicted / floor)", "actual error vs truth (mK)"),
                 _floor_rows(inputs, calibrated),
             )
