@@ -69,13 +69,14 @@ def _residual_panel(
             label="residual per channel")
     bx, by = binned(x, residual)
     ax.plot(bx, by, color=NEUTRAL, lw=1.3, label=f"residual, {x.size // bx.size}-channel bins")
+    choice, shown = spectrum.std_model_choice, spectrum.model_choice_share >= SHOWN_CHOICE_SHARE
     for sign in (1, -1):
         ax.plot(*envelope(x, sign * meas, pixels), color="C1", lw=1.3,
                 label="radiometer noise ±1σ" if sign > 0 else None)
         ax.plot(*envelope(x, sign * cal, pixels), color="k", ls="--", lw=0.9,
                 label="calibration ±1σ" if sign > 0 else None)
-        if spectrum.model_choice_share >= SHOWN_CHOICE_SHARE:
-            ax.plot(*envelope(x, sign * spectrum.std_model_choice, pixels), color="C3",
+        if shown:
+            ax.plot(*envelope(x, sign * choice, pixels), color="C3",
                     ls=":", lw=1.5, label="of which the choice of model" if sign > 0 else None)
     ratio = rms(residual) / rms(spectrum.std)
     ax.set_title(f"{name}: {rms(residual) * 1e3:.3g} mK RMS = {ratio:.2f} σ", **TITLE)
