@@ -284,15 +284,18 @@ def excess_split(chosen: Tally, truth: Tally) -> str:
     issue's case), and those at the truth's orders. Each kind's mean excess a run and
     share of the whole are given, the whole with its standard error.
     """
-    mine = dict(zip(chosen.runs, zip(chosen.ratios, chosen.beyond, chosen.short, strict=True),
-                    strict=True))
     oracle = dict(zip(truth.runs, truth.ratios, strict=True))
-    common = [i for i in mine if i in oracle]
-    if not common:
+    paired = [
+        (ratio**2 - oracle[i] ** 2, more > 0, fewer > 0)
+        for i, ratio, more, fewer in zip(
+            chosen.runs, chosen.ratios, chosen.beyond, chosen.short, strict=True
+        )
+        if i in oracle
+    ]
+    if not paired:
         return "no run both solved"
-    excess = np.array([mine[i][0] ** 2 - oracle[i] ** 2 for i in common])
-    beyond = np.array([mine[i][1] > 0 for i in common])
-    short = np.array([mine[i][2] > 0 for i in common]) & ~beyond
+    excess, beyond, short = (np.array(column) for column in zip(*paired, strict=True))
+    short &= ~beyond
     total = float(np.sum(excess))
     parts = []
     for label, kind in (
