@@ -376,7 +376,9 @@ def _print_per_channel_errors(
     error / floor over the channels weighs each channel once; it is taken over the
     channels whose floor is within 10x the median, and the others' largest is shown
     apart: there the floor, a first-order error, is not the error's size (one such
-    channel once took the RMS over 1229 channels from 1.02 to 1.17).
+    channel once took the RMS over 1229 channels from 1.02 to 1.17). The largest ratio
+    among the channels counted is shown with its frequency: about 3-4 over a thousand
+    channels of Gaussian errors, far more where one channel alone moves the RMS.
     """
     data, source = outcome.data, outcome.validation
     errors = sim.physics.calibration_errors_k(solution, data, source)
@@ -384,7 +386,11 @@ def _print_per_channel_errors(
     ratio = np.abs(errors / floor)
     degenerate = floor > 10 * np.median(floor)
     rms = float(np.sqrt(np.mean(ratio[~degenerate] ** 2)))
-    line = f"  per channel: RMS of error / floor {rms:.3f} over {int(np.sum(~degenerate))} channels"
+    worst = int(np.argmax(np.where(degenerate, -np.inf, ratio)))
+    line = (
+        f"  per channel: RMS of error / floor {rms:.3f} over {int(np.sum(~degenerate))} channels"
+        f" (largest {ratio[worst]:.2f} at {data.freq_hz[worst] / 1e6:.3f} MHz)"
+    )
     if np.any(degenerate):
         line += (
             f"; {int(np.sum(degenerate))} with a floor over 10x the median, largest error / "
