@@ -9,6 +9,7 @@ with ``solver: bayesian`` stores, uses, summarises, reports and shows its per-ch
 solution.
 """
 
+import re
 from pathlib import Path
 from textwrap import dedent
 
@@ -319,8 +320,8 @@ def test_a_run_with_a_per_channel_solver_stores_uses_reports_and_shows_it(tmp_pa
     # The antenna's actual error against the simulator's truth, each channel in units of
     # its own floor: over the 1228 channels whose floor is within 10x the median, so their
     # RMS is 1 to ~2 % (0.95-1.01 seen over 12 runs idle, 0.94-1.05 over 60 with two runs
-    # at once beside a two-core numpy load; CI once 1.103, so the whole output, its
-    # largest channel among it, is shown on failure). The one channel
+    # at once beside a two-core numpy load; CI once 1.103, so the whole output, with its
+    # largest channel, is shown on failure). The one channel
     # beyond took this RMS to 1.17 once in CI. The ratio of the two RMS values on the line
     # above it is not held either:
     # at 62.2 MHz the eight calibrators' reflections line up, that channel's floor is
@@ -329,9 +330,8 @@ def test_a_run_with_a_per_channel_solver_stores_uses_reports_and_shows_it(tmp_pa
     assert "actual calibration error against the simulator's truth: " in text
     normalised = float(text.split("per channel: RMS of error / floor ")[1].split(" ")[0])
     assert 0.9 < normalised < 1.1, text
-    largest, at = text.split("(largest ")[1].split(" MHz)")[0].split(" at ")
-    assert float(largest) >= normalised, text
-    assert 60.0 <= float(at) <= 75.0, text
+    # The largest channel's ratio and frequency are printed (a diagnosis, not a bound).
+    assert re.search(r"over 1228 channels \(largest \d+\.\d\d at \d+\.\d{3} MHz\)", text), text
     # The VNA's data-sheet error on the antenna, 8 refits: tens of kelvins for a per-channel
     # solve from 8 calibrators (median 42-43 K seen, RMS 45-48 K), where the floor is
     # tenths. The median, not the RMS: the degenerate channel above once took the RMS over
