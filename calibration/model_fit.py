@@ -473,11 +473,12 @@ def _hypotheses_with_own_widths(
     (:func:`~calibration.scale_fit.log_occam`, at the model where the polynomials' widths
     were refitted and at ``full``).
 
-    Measured with and without it (README, "Model choice"): at the widths' modes alone the
-    smooth functions, which fit their five widths to every term of the box, won runs of
-    exact quadratics 6-10 nats below the best polynomial, and their decay shrank the real
-    quadratic terms (the issue's case: median error / floor 1.002, RMS 1.106); with the
-    widths marginalised, 0.907 and 1.082.
+    Measured with and without it (``benchmarks/README.md``, "What the model-choice runs
+    showed"): at the widths' modes alone the smooth functions, which fit their five
+    widths to every term of the box, won runs of exact quadratics 6-10 nats below the
+    best polynomial, and their decay shrank the real quadratic terms (the issue's case:
+    median error / floor 1.002, RMS 1.106); with the widths marginalised, 0.907 and
+    1.082.
     """
     polynomials = {
         m: np.asarray(g) - np.log(n_models) + occam[0] for m, g in grids.items()

@@ -35,7 +35,7 @@ posterior (:func:`calibration.model_fit.fit`) offers this as a third hypothesis 
 the receiver, beside polynomials and smooth functions under one scale,
 all three at even prior odds; the data weigh them through the evidence. Measured on the
 benchmark's earlier ensembles, whose random terms were sized in the prior's shrunk sd
-(README, "Model choice"; ``python -m benchmarks.model_choice --runs 100 --seed 100``,
+(``benchmarks/README.md``; ``python -m benchmarks.model_choice --runs 100 --seed 100``,
 the same runs, actual / predicted error and 68/95 % coverage): smooth truths whose five
 parameters have their own sizes and decays 1.14, 61/92 % -> 1.07, 65/94 %; 8 calibrators
 1.23 -> 1.22; the four EDGES loads 1.04 -> 1.03; the other rows unchanged (REACH-like

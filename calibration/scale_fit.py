@@ -49,16 +49,17 @@ higher terms of the smooth functions are pinned down more sharply than five fitt
 few terms of a polynomial, and pay a larger Occam factor for it (2-3 nats more, median).
 
 Measured on the benchmark's ensembles (``python -m benchmarks.model_choice --runs 100
---seed 100``; README, "Model choice", gives every row and the alternatives): against
-type-II widths alone, the half-Cauchy's receiver scale lengthens the error bars where the
-data see least (8 calibrators, actual / predicted 1.15 -> 1.12); a fixed scale for it
-(1, 10, 100 or 3000 K) moves the figures with a number nobody measured; the widths
-marginalised rather than taken at their mode (:func:`log_occam`) stop the smooth
-functions winning runs of exact quadratics 6-10 nats below the best polynomial (the
-issue's case, RMS over runs 1.106 -> 1.082). Refitting the widths at each leading model
-or marginalising them by importance sampling moved none of the figures, nor did
-marginalising the decay (8 calibrators, RMS over runs 1.165 and, its posterior too,
-1.161, against 1.166) or giving the smooth functions a decay per parameter (1.165).
+--seed 100``; README, "Model choice", gives every row, ``benchmarks/README.md`` the
+alternatives): against type-II widths alone, the half-Cauchy's receiver scale lengthens
+the error bars where the data see least (8 calibrators, actual / predicted 1.15 ->
+1.12); a fixed scale for it (1, 10, 100 or 3000 K) moves the figures with a number
+nobody measured; the widths marginalised rather than taken at their mode
+(:func:`log_occam`) stop the smooth functions winning runs of exact quadratics 6-10 nats
+below the best polynomial (the issue's case, RMS over runs 1.106 -> 1.082). Refitting
+the widths at each leading model or marginalising them by importance sampling moved none
+of the figures, nor did marginalising the decay (8 calibrators, RMS over runs 1.165 and,
+its posterior too, 1.161, against 1.166) or giving the smooth functions a decay per
+parameter (1.165).
 """
 
 from __future__ import annotations

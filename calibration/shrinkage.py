@@ -41,9 +41,10 @@ outside the error bars. By default (``per_parameter``) each parameter's ``tau_k`
 the shared ``rho``) is set by the data (:mod:`calibration.scale_fit`: at the largest
 model for the smooth-function hypothesis, at the best polynomial for the polynomials),
 and the orders are chosen and averaged under those widths; this grid then serves as the
-fit's start. Measured on the benchmark's ensembles (README, "Model choice"), the shared
-scale's error bars were 15-24 % short where the data constrain least (8 calibrators,
-the four EDGES loads, smooth truths), the fitted scales' 6-14 %.
+fit's start. Measured on the benchmark's ensembles (``benchmarks/README.md``, "What the
+model-choice runs showed"), the shared scale's error bars were 15-24 % short where the
+data constrain least (8 calibrators, the four EDGES loads, smooth truths), the fitted
+scales' 6-14 %.
 
 The noise scale ``s^2`` keeps its inverse-gamma prior (:class:`~calibration.conjugate.ScalePrior`),
 so the coefficient prior, being that of a normal-inverse-gamma model, scales with
