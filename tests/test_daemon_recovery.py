@@ -5,6 +5,7 @@ it outlives the daemon: SIGKILL the daemon at random moments of a run, start it 
 and the front-end, the run files and the queue must be as the issue says.
 """
 
+import json
 import os
 import signal
 import subprocess
@@ -13,13 +14,16 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
+import h5py
+import numpy as np
 import pytest
 import yaml
 
 from reach_receiver.cli import run_main
 from reach_receiver.daemon.client import DaemonClient, daemon_answers
+from reach_receiver.run.resume import carry
 from reach_receiver.schedule.lst import local_sidereal_time_h
-from reach_receiver.store import read_run_file
+from reach_receiver.store import RunStore, read_run_file
 from reach_receiver.store.parts import list_parts
 
 ENTRY = "from reach_receiver.cli import {main}; import sys; sys.exit({main}(sys.argv[1:]))"
@@ -213,3 +217,69 @@ def test_a_timer_fires_when_its_sidereal_time_comes(reach_sim, tmp_path):
         assert job["origin"] == "timer soon (on time)"
     finally:
         assert finish(second)[0] == 0
+
+
+QUICK = Path(__file__).parent.parent / "schedules" / "quick.yaml"
+
+
+@pytest.fixture(scope="module")
+def completed_quick(reach_sim, tmp_path_factory):
+    """A quick.yaml run through reachd to completion (calibrated): the root and its job."""
+    root = tmp_path_factory.mktemp("quick")
+    site = site_file(root, reach_sim, resume=True)
+    reachd = start_reachd(site)
+    assert run_main(["--site", str(site), str(QUICK), "--detach"]) == 0
+    (job,) = wait(lambda: [j for j in jobs(root) if j["state"] not in ("queued", "running")],
+                  timeout_s=180)
+    code, log = finish(reachd)
+    assert code == 0, log
+    assert job["state"] == "completed", job["reason"]
+    return root, site, job
+
+
+def test_a_daemon_killed_after_the_final_merge_records_the_run_as_it_ended(completed_quick):
+    # SIGKILL between a run's final merge and the job's record: the queue still says
+    # "running"; the run file says "completed". The run file is the truth.
+    root, site, job = completed_quick
+    queue_file = root / "state" / "queue.json"
+    kept = queue_file.read_text()
+    queue = json.loads(kept)
+    queue["jobs"][0].update(state="running", ended=None)
+    queue_file.write_text(json.dumps(queue))
+    try:
+        again = start_reachd(site)
+        (after,) = jobs(root)
+        code, log = finish(again)
+    finally:
+        queue_file.write_text(kept)
+    assert code == 0, log
+    assert after["id"] == job["id"]
+    assert after["state"] == "completed", after
+    assert "resumption" not in log  # nothing queued again: the run had ended
+    assert read_run_file(Path(job["run"]) / "run.h5").status == "completed"
+
+
+def test_a_carried_calibration_names_the_copies_of_what_it_used(completed_quick, tmp_path):
+    # A resumed run copies the measurements under its own numbers; the calibration it
+    # carries must name those copies, or the merge reads other measurements (or none).
+    _, _, job = completed_quick
+    original = Path(job["run"]) / "run.h5"
+    with h5py.File(original, "r") as f:
+        width, band = float(f["run"].attrs["channel_width_hz"]), f["run"].attrs["band_hz"]
+    store = RunStore(tmp_path / "resumed", name="quick", schedule_files=[], site_yaml="",
+                     metadata={}, channel_width_hz=width, band_hz=(band[0], band[1]))
+    store.open()
+    store.add_event("note", "a first measurement, so that every number moves", timestamp=0.0)
+    carried = carry(store, original)
+    merged = store.finish("completed")
+    assert carried > 0
+    with h5py.File(original, "r") as before, h5py.File(merged, "r") as after:
+        for name in ("lna_s11", "hot_spectra", "cold_s11"):
+            np.testing.assert_array_equal(after["observation_data"][name][()],
+                                          before["observation_data"][name][()])
+        used = json.loads(after["observation_metadata"].attrs["handover"])
+        names = {int(n): after["measurements"][k].attrs["name"]
+                 for k in after["measurements"]
+                 for n in [after["measurements"][k].attrs["sequence"]]}
+        assert names[used["s11"]["lna"]] == "lna"
+        assert {names[n] for n in used["cycles"]["hot"]} == {"hot"}

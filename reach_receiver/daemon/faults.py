@@ -21,7 +21,7 @@ from reach_receiver.store import RUN_FILE
 
 from .base import DaemonBase
 from .jobs import Job
-from .recovery import recover_run, recover_runs
+from .recovery import recover_runs, run_outcome
 
 log = logging.getLogger(__name__)
 
@@ -62,18 +62,39 @@ class FaultHandling(DaemonBase):
             self.machine.go("idle", "the front-end answers again")
 
     def _recover(self) -> None:
-        """Close runs left open; jobs that were running are interrupted (and resumed)."""
+        """Close runs left open; each job that was running ends as its run file says.
+
+        A run merged ``completed`` (or ``failed``) before the daemon died gives its job
+        that state; only an interrupted run is resumed (with the site's ``resume``
+        policy). A job whose run never began is queued again whole under that policy.
+        """
         recovered = {r.directory: r for r in recover_runs(self.dirs.runs)}
+        for failed in (r for r in recovered.values() if r.error):
+            self.alarms[f"recovery {failed.directory.name}"] = failed.reason
         for job in self.queue.jobs("running"):
             directory = Path(job.run) if job.run else None
             found = recovered.get(directory) if directory else None
             if directory is not None and found is None:
-                found = recover_run(directory)
+                found = run_outcome(directory)
+            state = found.status if found else "interrupted"
             reason = found.reason if found else "the daemon stopped before the run began"
-            self.queue.update(job, state="interrupted", ended=time.time(), reason=reason)
-            log.warning("job %d was running when the daemon stopped: %s", job.id, reason)
-            if self.site.daemon.resume and directory is not None:
-                self._queue_resumption(job, directory / RUN_FILE)
+            self.queue.update(job, state=state, ended=time.time(), reason=reason)
+            log.warning("job %d was running when the daemon stopped: its run is %s%s",
+                        job.id, state, f" ({reason})" if reason else "")
+            if found is not None and found.error:
+                self.alarms[f"recovery {found.directory.name}"] = reason
+            elif self.site.daemon.resume and state == "interrupted":
+                if found is None and not job.origin.startswith("restart of"):
+                    self._queue_again(job)  # once: a job that kills the daemon must not loop
+                elif directory is not None:
+                    self._queue_resumption(job, directory / RUN_FILE)
+
+    def _queue_again(self, job: Job) -> None:
+        again = self.queue.add(
+            job.name, job.schedule, job.files, f"restart of job {job.id}", time.time(),
+            resumes=list(job.resumes), first=True,
+        )
+        log.warning("job %d runs job %d again: it stopped before its run began", again.id, job.id)
 
     def _queue_resumption(self, job: Job, run_file: Path) -> None:
         if not run_file.exists():

@@ -23,6 +23,7 @@ from reach_receiver.run.session import RunFailed, RunSession, RunSummary
 from reach_receiver.run.steps import Observe
 from reach_receiver.schedule.compile import ScheduleError, compile_text
 from reach_receiver.schedule.steps import Schedule, Step
+from reach_receiver.store import RUN_FILE
 
 from .events import HubLog, HubProgress
 from .faults import FaultHandling
@@ -133,6 +134,10 @@ class JobRunning(FaultHandling):
                           report=report)
         self.hub.publish(job.id, "end", state=state, reason=reason, run=run, report=report)
         if self.machine.state == "stopping":
+            # The daemon itself is stopping (SIGTERM, SIGHUP: a restart, a reboot): the
+            # schedule goes on after it, from where the run stopped, if the site says so.
+            if state == "interrupted" and self.site.daemon.resume and run is not None:
+                self._queue_resumption(job, Path(run) / RUN_FILE)
             return
         if failure is None or state in ("interrupted", "cancelled"):
             self.machine.go("idle", f"job {job.id} {state}")

@@ -22,20 +22,29 @@ changed.
 
 from __future__ import annotations
 
+import io
 import json
-from collections.abc import Sequence
+import logging
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import h5py
 
 from reach_receiver.schedule.kinds import KindRegistry
 from reach_receiver.schedule.steps import Schedule, Step
-from reach_receiver.store import RunContents, RunStore, read_run_file
+from reach_receiver.store import HandOver, RunContents, RunStore, read_run_file
+from reach_receiver.store.parts import as_str
 
 from .context import STEP_EVENT
 
+log = logging.getLogger(__name__)
+
 Path_ = tuple[int, ...]
+#: The attribute in which a calibration records its hand-over (by measurement number).
+HANDOVER = "handover"
 
 #: Measurement kinds a resumed run copies from the run it continues.
 CARRIED_KINDS = ("s11", "dicke", "spectrum", "temperatures", "check", "solution", "calibrated")
@@ -110,12 +119,43 @@ def resumed_schedule(schedule: Schedule, run_file: Path) -> Schedule:
 
 
 def carry(store: RunStore, run_file: Path) -> int:
-    """Copy the measurements of an interrupted run into a new run's store; how many."""
+    """Copy the measurements of an interrupted run into a new run's store; how many.
+
+    The copies get the new run's numbers; a carried calibration's hand-over, which
+    names the measurements it used by number, is renumbered to name the copies
+    (:func:`_renumbered_copy`), so that the new run's merge reads the right ones.
+    """
     contents = read_run_file(run_file)
-    count = 0
+    numbers: dict[int, int] = {}
     for m in contents.measurements:
         if m.kind in CARRIED_KINDS:
             with h5py.File(m.file, "r") as f:
-                store.add_copy(f[m.location], origin=f"{contents.path}#{m.sequence}")
-            count += 1
-    return count
+                group = f[m.location]
+                origin = f"{contents.path}#{m.sequence}"
+                if HANDOVER in group.attrs:
+                    with _renumbered_copy(group, numbers) as copy:
+                        numbers[m.sequence] = store.add_copy(copy, origin=origin)
+                else:
+                    numbers[m.sequence] = store.add_copy(group, origin=origin)
+    return len(numbers)
+
+
+@contextmanager
+def _renumbered_copy(group: Any, numbers: dict[int, int]) -> Iterator[Any]:
+    """``group`` copied in memory with its hand-over naming the new numbers.
+
+    A hand-over naming a measurement that was not carried (none is left out today:
+    every kind a calibration uses is carried) is dropped, and the merge chooses the
+    measurements again by the hand-over's rule.
+    """
+    with h5py.File(io.BytesIO(), "w") as memory:
+        group.copy(group, memory, name="copy")
+        copy = memory["copy"]
+        try:
+            handover = HandOver.from_json(as_str(group.attrs[HANDOVER])).renumbered(numbers)
+            copy.attrs[HANDOVER] = handover.to_json()
+        except KeyError as err:
+            del copy.attrs[HANDOVER]
+            log.warning("carried %s without its hand-over: measurement %s was not carried",
+                        group.name, err)
+        yield copy

@@ -47,7 +47,7 @@ import io
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import h5py
@@ -138,6 +138,19 @@ class HandOver:
         """Every measurement used, by number."""
         used = {*self.s11.values(), *(n for seqs in self.cycles.values() for n in seqs)}
         return tuple(sorted(used))
+
+    def renumbered(self, numbers: Mapping[int, int]) -> HandOver:
+        """The same hand-over with its measurements named by new numbers.
+
+        A resumed run stores copies of an earlier run's measurements under its own
+        numbers (:func:`reach_receiver.run.resume.carry`); a carried calibration's
+        hand-over must name the copies. ``KeyError`` when one of them was not copied.
+        """
+        return replace(
+            self,
+            cycles={k: tuple(numbers[n] for n in v) for k, v in self.cycles.items()},
+            s11={k: numbers[n] for k, n in self.s11.items()},
+        )
 
     def to_json(self) -> str:
         """The hand-over as JSON, as a run file records it."""
