@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
@@ -40,8 +41,9 @@ from reach_receiver.schedule.kinds import KindRegistry
 from reach_receiver.schedule.lst import apparent_lst_h
 from reach_receiver.schedule.steps import Schedule, Step
 from reach_receiver.schedule.timing import TimelineEntry, timeline
-from reach_receiver.store.parts import FILE_MODE
+from reach_receiver.store.parts import FILE_MODE, PARTS_DIR
 from reach_receiver.store.run_store import RunStore, software_versions
+from reach_receiver.store.space import DiskFull
 
 from .context import (
     CheckRecord,
@@ -260,9 +262,9 @@ class RunSession:
         except BaseException as err:
             self.closing = True
             status, reason = _ending(err, current, self.token.reason)
-            run_file = _fail_safe(run, status, reason, err)
+            run_file, kept = _fail_safe(run, status, reason, err)
             if isinstance(err, Exception | KeyboardInterrupt):
-                raise RunFailed(reason, run_file, status) from err
+                raise RunFailed(f"{reason}; {kept}" if kept else reason, run_file, status) from err
             raise  # SystemExit and the like: the run is closed, let it go on
         finally:
             run.stop_temperatures()
@@ -313,8 +315,16 @@ def _ending(err: BaseException, current: Step | None, requested: str) -> tuple[s
     return "failed", f"internal error {type(err).__name__}{where}: {err}"
 
 
-def _fail_safe(run: RunContext, status: str, reason: str, err: BaseException) -> Path | None:
-    """Safe state first, then the record: each part tried even if another fails."""
+def _fail_safe(
+    run: RunContext, status: str, reason: str, err: BaseException
+) -> tuple[Path | None, str]:
+    """Safe state first, then the record: each part tried even if another fails.
+
+    Returns the merged run file (``None`` when it could not be merged) and, then, where
+    the measurements are kept instead: on a full disk the part files stay as they are,
+    each readable, and the run is merged once there is room (a later merge, or
+    ``reachd``'s recovery at its start).
+    """
     if status == "failed" and not isinstance(err, ReceiverError | OSError):
         log.error("run %s: %s", status, reason, exc_info=err)
     else:
@@ -331,15 +341,22 @@ def _fail_safe(run: RunContext, status: str, reason: str, err: BaseException) ->
     except (ReceiverError, OSError) as temp_err:
         log.error("could not store the last temperatures: %s", temp_err)
     _store_health(run)
-    try:
-        message = f"{reason}; {safe_note}"
-        if pins:
-            message += " (" + " ".join(f"{k}={v}" for k, v in pins.items()) + ")"
-        run.store.add_event(status, message, timestamp=run.clock.now())
-        return run.store.finish(status, f"{reason}; {safe_note}")
-    except (ReceiverError, OSError) as store_err:
-        log.critical("could not close the run file: %s", store_err)
-        return None
+    store_err: BaseException = err  # a finished store's end is recorded: its merge failed
+    if not run.store.finished:
+        try:
+            message = f"{reason}; {safe_note}"
+            if pins:
+                message += " (" + " ".join(f"{k}={v}" for k, v in pins.items()) + ")"
+            run.store.add_event(status, message, timestamp=run.clock.now())
+            return run.store.finish(status, f"{reason}; {safe_note}"), ""
+        except (ReceiverError, OSError) as failed:
+            store_err = failed
+    log.critical("could not close the run file: %s", store_err)
+    parts = run.store.directory / PARTS_DIR
+    kept = f"its measurements are kept as part files in {parts}" if parts.is_dir() else ""
+    if kept and isinstance(store_err, DiskFull):
+        kept += ", to be merged into its run file once there is room"
+    return None, kept
 
 
 def _store_health(run: RunContext) -> None:
@@ -355,10 +372,25 @@ def _store_health(run: RunContext) -> None:
         log.info("%d health readings of the monitor stored with the run", count)
 
 
+class _RunLogHandler(logging.FileHandler):
+    """``run.log``: a line that cannot be written (a full disk) is dropped, said once.
+
+    The logging module's own answer would be a traceback on standard error for every
+    line; the run goes on and its error, if the disk stays full, names the disk.
+    """
+
+    dropped = False
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        if not self.dropped:
+            self.dropped = True
+            sys.stderr.write(f"{self.baseFilename}: log lines dropped ({sys.exc_info()[1]})\n")
+
+
 @contextlib.contextmanager
 def _run_log(path: Path) -> Iterator[None]:
     """Everything the receiver side logs at INFO and above, also in the run's ``run.log``."""
-    handler = logging.FileHandler(path, encoding="utf-8")
+    handler = _RunLogHandler(path, encoding="utf-8")
     os.chmod(path, FILE_MODE)
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter(LOG_FORMAT))
@@ -374,4 +406,5 @@ def _run_log(path: Path) -> Iterator[None]:
         for lg, level in zip(loggers, previous, strict=True):
             lg.removeHandler(handler)
             lg.setLevel(level)
-        handler.close()
+        with contextlib.suppress(OSError):  # its last lines did not fit: said above
+            handler.close()

@@ -7,7 +7,7 @@ measurements as taken and the REACH layout that :func:`calibration.hdf5_io.read_
 reads (:mod:`.merge`). :func:`read_run_file` reads a run back, merged or not;
 :mod:`.touchstone` re-exports the engine's Touchstone S1P/S2P reader and writer.
 :mod:`.handover` is the one place where a run's measurements become the calibration
-engine's input.
+engine's input. :mod:`.space` refuses, by name, a write the disk has no room for.
 """
 
 from .handover import HandOver
@@ -15,11 +15,13 @@ from .merge import RUN_FILE, merge_run
 from .parts import StoreError
 from .reader import Measurement, RunContents, read_run_file
 from .run_store import DICKE_POSITIONS, EngineView, RunStore, software_versions
+from .space import DiskFull
 from .touchstone import TouchstoneError, read_touchstone, write_touchstone
 
 __all__ = [
     "DICKE_POSITIONS",
     "RUN_FILE",
+    "DiskFull",
     "EngineView",
     "HandOver",
     "Measurement",

@@ -29,9 +29,10 @@ not, stays in ``/measurements``; what was left out is named in the ``warnings``
 attribute of ``/observation_data``.
 
 Merging is atomic (:func:`~reach_receiver.store.parts.atomic_h5`) and idempotent: the
-parts are deleted only after ``run.h5`` replaced its predecessor, and a new merge takes
-the union of the measurements already in ``run.h5`` and the parts still present, so a
-merge killed at any point can simply be run again.
+parts are deleted only after ``run.h5`` replaced its predecessor (a disk too full for
+the merged file is a :class:`~.space.DiskFull` that leaves every part in place), and a
+new merge takes the union of the measurements already in ``run.h5`` and the parts still
+present, so a merge killed (or refused) at any point can simply be run again.
 """
 
 from __future__ import annotations
@@ -186,7 +187,7 @@ def write_run_file(
             "name": as_str(desc.attrs["run_name"]),
             "metadata": meta,
         }
-        with atomic_h5(target, attrs) as f:
+        with atomic_h5(target, attrs, f"the merged run file ({target.name})") as f:
             _copy_into(desc, f.create_group("run"))
             out = f.create_group("measurements")
             for r in records:

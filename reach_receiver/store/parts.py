@@ -1,9 +1,10 @@
 """Part files: one HDF5 file per measurement, each made durable atomically.
 
 A run directory holds ``parts/NNNNNN-<kind>-<name>.h5``, numbered in the order the
-measurements completed. A part is written under a temporary name in the same directory
-(``.NNNNNN-<kind>-<name>.h5.<random>.tmp``), flushed, ``fsync``-ed, moved onto its final
-name with :func:`os.replace` and the directory is ``fsync``-ed. ``rename`` within one
+measurements completed. A part is built in memory, written under a temporary name in
+the same directory (``.NNNNNN-<kind>-<name>.h5.<random>.tmp``) once there is room for it
+(:mod:`.space`), ``fsync``-ed, moved onto its final name with :func:`os.replace` and the
+directory is ``fsync``-ed. ``rename`` within one
 directory is atomic on POSIX file systems, and the directory sync makes the new name
 itself durable (the ext4/XFS rule: a rename is only on disk once its directory is). So a
 part is complete if and only if its final name exists; a process killed mid-write
@@ -17,11 +18,11 @@ its contents are those of one ``/measurements/...`` group of the merged run file
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import logging
 import os
 import re
-import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +32,8 @@ import h5py
 import numpy as np
 
 from reach_receiver.errors import ReceiverError
+
+from .space import write_durably
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +54,11 @@ UNITS_POWER = "power (arbitrary)"
 UNITS_REFLECTION = "complex reflection"
 UNITS_NONE = "1"
 UNITS_TEXT = "text"
+
+#: Kinds of the small records that close a run: they may use the reserve.
+CLOSING_KINDS = frozenset({"event", "status"})
+#: Room a measurement leaves free for the records that close the run (bytes).
+RESERVE_BYTES = 256 * 1024
 
 _PART_RE = re.compile(r"^(\d{6})-([a-z0-9_]+)-(.+)\.h5$")
 _SAFE_RE = re.compile(r"[^A-Za-z0-9_.+]+")
@@ -143,31 +151,26 @@ def fsync_directory(directory: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_h5(target: Path, attrs: Mapping[str, Any]) -> Iterator[Any]:
+def atomic_h5(
+    target: Path, attrs: Mapping[str, Any], what: str = "the file", reserve_bytes: int = 0
+) -> Iterator[Any]:
     """Yield a new HDF5 file that appears as ``target`` only once completely written.
 
-    The temporary sits beside ``target`` (same file system, so the rename is atomic) and
-    starts with a dot and ends in ``.tmp`` so that listings skip it.
+    The file is built in memory and written by :func:`~.space.write_durably`: HDF5 never
+    writes to the disk itself, so a full disk is a :class:`~.space.DiskFull` naming the
+    room there is and the room ``what`` needs (beyond ``reserve_bytes`` kept free), and
+    the library is left as sound as before. The temporary sits beside ``target`` (same
+    file system, so the rename is atomic), starts with a dot and ends in ``.tmp`` so
+    that listings skip it.
     """
-    fd, tmp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    try:
-        share_with_group(fd, target.parent)
-    finally:
-        os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        with h5py.File(tmp, "w") as f:
-            f.attrs.update(dict(attrs))
-            yield f
-            f.flush()
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-        fsync_directory(target.parent)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
+        f.attrs.update(dict(attrs))
+        yield f
+    write_durably(
+        target, buffer.getbuffer(), what, reserve_bytes=reserve_bytes,
+        prepare=lambda fd: share_with_group(fd, target.parent),
+    )
 
 
 def write_part(
@@ -178,7 +181,12 @@ def write_part(
     timestamp: float,
     fill: Callable[[Any], None],
 ) -> Path:
-    """Write one part durably: ``fill`` receives the open file; returns the final path."""
+    """Write one part durably: ``fill`` receives the open file; returns the final path.
+
+    A measurement is refused (:class:`~.space.DiskFull`) unless :data:`RESERVE_BYTES`
+    stay free after it, so that the records that close a run (:data:`CLOSING_KINDS`)
+    still fit when the disk fills during the run.
+    """
     target = directory / PARTS_DIR / part_filename(sequence, kind, name)
     if target.exists():
         raise StoreError(f"{target}: part already exists (two writers on one run?)")
@@ -190,7 +198,8 @@ def write_part(
         "sequence": sequence,
         "timestamp": float(timestamp),
     }
-    with atomic_h5(target, attrs) as f:
+    reserve = 0 if kind in CLOSING_KINDS else RESERVE_BYTES
+    with atomic_h5(target, attrs, f"a measurement ({kind} {name})", reserve) as f:
         fill(f)
     return target
 

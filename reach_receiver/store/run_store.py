@@ -199,6 +199,11 @@ class RunStore:
         return self._band_hz
 
     @property
+    def finished(self) -> bool:
+        """Whether the run's end is recorded (its merge may still have failed)."""
+        return self._state == "finished"
+
+    @property
     def run_file(self) -> Path:
         """Where :meth:`finish` writes the merged run."""
         return self.directory / RUN_FILE
@@ -220,7 +225,11 @@ class RunStore:
             self.finish("failed", f"{kind.__name__}: {err}")
 
     def open(self) -> None:
-        """Create the directory and write the run-description part (number 0)."""
+        """Create the directory and write the run-description part (number 0).
+
+        When the description cannot be written (a full disk), the directory is removed
+        again and the error raised: no run began.
+        """
         if self._state != "new":
             raise StoreError(f"{self.directory}: run store already {self._state}")
         make_shared_directory(self.directory)
@@ -230,7 +239,14 @@ class RunStore:
         fsync_directory(self.directory)
         clean_temporaries(self.directory)
         self._state = "open"
-        self._add("run", "description", time.time(), self._write_description)
+        try:
+            self._add("run", "description", time.time(), self._write_description)
+        except BaseException:
+            self._state = "new"  # no run began: leave no empty run directory behind
+            for empty in (self.directory / PARTS_DIR, self.directory):
+                with contextlib.suppress(OSError):
+                    empty.rmdir()
+            raise
 
     def _write_description(self, f: Any) -> None:
         for i, (path, text) in enumerate(self._schedule_files):
