@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
 from .basis import BasisKind, PolynomialBasis
+from .constants import ITPM_CHANNEL_WIDTH_HZ
 from .data import CalibrationData, Integration, SourceData
 from .noise_waves import dicke_powers
 from .polynomial_model import PolynomialParameters
@@ -35,8 +36,6 @@ from .reflections import lna_reflection, reach_source_reflection
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
-#: iTPM channelisation: 400 MSPS sampled, 32768-point FFT.
-ITPM_CHANNEL_WIDTH_HZ = 400e6 / 32768
 
 #: The twelve REACH calibrators (thesis table A.2), REACH names.
 REACH_CALIBRATORS: tuple[str, ...] = (

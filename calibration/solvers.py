@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .basis import BasisKind
+from .constants import METHODS, PER_CHANNEL_METHODS, POLYNOMIAL_METHODS
 from .data import CalibrationData, SourceData
 from .errors import InvalidDataError
 from .model_fit import OrderChoice
@@ -77,9 +78,6 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 #: The solvers by name, the default first.
-METHODS = ("radiometric", "thesis", "least-squares", "bayesian")
-POLYNOMIAL_METHODS = ("radiometric", "thesis")
-PER_CHANNEL_METHODS = ("least-squares", "bayesian")
 
 #: A solution of any solver.
 AnySolution: TypeAlias = Solution | ChannelSolution

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import os
 import signal
 import sys
@@ -27,19 +28,13 @@ from types import FrameType
 from reach_receiver.clock import Clock, SystemClock
 from reach_receiver.config.daemon import DaemonSettings
 from reach_receiver.config.site import SiteConfig, find_site, load_site
-from reach_receiver.daemon import doctor
-from reach_receiver.daemon.doctor import Check, failed, format_checks, run_checks
 from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
-from reach_receiver.daemon.service import Daemon, Directories
+from reach_receiver.devices.teensy import Teensy
 from reach_receiver.errors import ReceiverError
-from reach_receiver.sim.receiver import (
-    DEFAULT_COMPRESSION,
-    SimulatedReceiver,
-    SimulationSettings,
-    spectrum_period_for,
-)
 
 from .logs import add_version, configure_logging
+
+log = logging.getLogger("reach_receiver.daemon")
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
 
@@ -57,8 +52,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--runtime-dir", type=Path, help="control socket (default: the site's)")
     p.add_argument("--state-dir", type=Path, help="queue, lock and runs (default: the site's)")
     p.add_argument("--site-out", type=Path, help="--sim: write the site file clients use here")
-    p.add_argument("--compression", type=float, default=DEFAULT_COMPRESSION,
-                   help=f"--sim: simulated seconds per real second ({DEFAULT_COMPRESSION:g})")
+    p.add_argument("--compression", type=float, default=None,
+                   help="--sim: simulated seconds per real second (the simulator's default)")
     p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO on standard error")
     add_version(p)
@@ -80,16 +75,7 @@ def reachd_main(argv: Sequence[str] | None = None) -> int:
             return 2
         return _check(base, args)
     if args.sim:
-        settings = SimulationSettings(
-            compression=args.compression,
-            spectrum_period_s=spectrum_period_for(args.compression),
-            seed=args.seed,
-        )
-        with SimulatedReceiver(settings) as sim:
-            site = _with_sim(base, sim.site(), args)
-            if args.site_out is not None:
-                _write(args.site_out, site.to_yaml())
-            return _serve(site, sim.clock, args)
+        return _serve_sim(base, args)
     assert base is not None
     return _serve(_with_dirs(base, args), base.clock(), args)
 
@@ -120,9 +106,50 @@ def _write(path: Path, text: str) -> None:
     os.replace(partial, path)
 
 
+def _serve_sim(base: SiteConfig | None, args: argparse.Namespace) -> int:
+    """The daemon over a simulated receiver started in this process."""
+    from reach_receiver.sim.receiver import (
+        DEFAULT_COMPRESSION,
+        SimulatedReceiver,
+        SimulationSettings,
+        spectrum_period_for,
+    )
+
+    compression = DEFAULT_COMPRESSION if args.compression is None else args.compression
+    settings = SimulationSettings(
+        compression=compression,
+        spectrum_period_s=spectrum_period_for(compression),
+        seed=args.seed,
+    )
+    with SimulatedReceiver(settings) as sim:
+        site = _with_sim(base, sim.site(), args)
+        if args.site_out is not None:
+            _write(args.site_out, site.to_yaml())
+        return _serve(site, sim.clock, args)
+
+
 def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
-    dirs = Directories(site.daemon.runtime_directory(), site.daemon.state_directory())
-    daemon = Daemon(site, clock, dirs)
+    """Lock, safe state, then the daemon; exit 0 after a clean stop, 1 if it cannot start.
+
+    The lock comes first, so that a second ``reachd`` on the same directories is refused
+    before it touches anything of the first (its socket, its queue, the front-end); the
+    safe state second, through the Teensy alone, before the rest of the daemon (the run
+    layer, the engine, astropy) is even imported: a front-end a crash left powered is
+    safe within a second of the restart.
+    """
+    dirs_state = site.daemon.state_directory()
+    lock = HardwareLock(dirs_state, f"reachd ({site.source})")
+    try:
+        lock.acquire()
+    except (HardwareBusy, OSError) as err:
+        print(f"reachd: cannot start: {err}", file=sys.stderr)
+        return 1
+    made_safe = _safe_first(site)
+
+    from reach_receiver.daemon.service import Daemon, Directories
+
+    dirs = Directories(site.daemon.runtime_directory(), dirs_state)
+    daemon = Daemon(site, clock, dirs, lock=lock)
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         del frame
@@ -131,7 +158,7 @@ def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
     for handled in STOP_SIGNALS:
         signal.signal(handled, on_signal)
     try:
-        daemon.start()
+        daemon.start(made_safe)
     except (ReceiverError, OSError) as err:
         print(f"reachd: cannot start: {err}", file=sys.stderr)
         daemon.close()
@@ -146,8 +173,35 @@ def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
     return 0
 
 
+def _safe_first(site: SiteConfig) -> str:
+    """Command the safe state through the Teensy alone; ``""`` or what went wrong."""
+    teensy = site.devices.teensy
+    try:
+        state = Teensy.command_safe(teensy.port, teensy.timeout_s)
+    except (ReceiverError, OSError) as err:
+        log.error("front-end: cannot command the safe state at start: %s", err)
+        return str(err) or type(err).__name__
+    log.info("front-end safe: %s (%.2f s after reachd started)",
+             state.describe(), seconds_since_start())
+    return ""
+
+
+def seconds_since_start() -> float:
+    """Seconds since this process started (its start time in ``/proc/self/stat``)."""
+    try:
+        stat = Path("/proc/self/stat").read_text()
+        ticks = int(stat.rsplit(")", 1)[1].split()[19])  # field 22, starttime
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+    return uptime - ticks / os.sysconf("SC_CLK_TCK")
+
+
 def _check(site: SiteConfig, args: argparse.Namespace) -> int:
     """The installation's checks; the devices only when no daemon owns them."""
+    from reach_receiver.daemon import doctor
+    from reach_receiver.daemon.doctor import Check, failed, format_checks, run_checks
+
     site = _with_dirs(site, args)
     state, runtime = site.daemon.state_directory(), site.daemon.runtime_directory()
     lock = HardwareLock(state, "reachd --check")

@@ -37,7 +37,7 @@ from typing import Any
 
 import yaml
 
-from calibration.solvers import METHODS
+from calibration.constants import METHODS
 from reach_receiver.clock import Clock, CompressedClock, SystemClock
 from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.layout import (

@@ -15,8 +15,8 @@ import logging
 import time
 from pathlib import Path
 
+from reach_receiver.devices.teensy import Teensy
 from reach_receiver.errors import ReceiverError
-from reach_receiver.run.instruments import Instruments
 from reach_receiver.store import RUN_FILE
 
 from .base import DaemonBase
@@ -34,9 +34,18 @@ class FaultHandling(DaemonBase):
 
     def _go_safe(self) -> None:
         """Put the front-end in its safe state through the Teensy alone, and let it go."""
+        teensy = self.site.devices.teensy
         with self.monitor.hardware():
-            state = Instruments.from_site(self.site, self.clock).make_safe()
-        log.info("front-end safe: %s", " ".join(f"{k}={v}" for k, v in state.as_pins().items()))
+            state = Teensy.command_safe(teensy.port, teensy.timeout_s)
+        log.info("front-end safe: %s", state.describe())
+
+    def _try_safe(self) -> str:
+        """:meth:`_go_safe`; ``""`` when the front-end answered, what went wrong otherwise."""
+        try:
+            self._go_safe()
+        except (ReceiverError, OSError) as err:
+            return str(err) or type(err).__name__
+        return ""
 
     def _link_failed(self, reason: str, job: Job | None = None) -> None:
         self.alarms["link"] = reason

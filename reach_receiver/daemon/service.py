@@ -34,7 +34,6 @@ import time
 
 from reach_receiver.clock import Clock, StopEvent
 from reach_receiver.config.site import SiteConfig
-from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor import Monitor
 from reach_receiver.run.steps import STANDARD_KINDS
 from reach_receiver.schedule.kinds import KindRegistry
@@ -73,6 +72,8 @@ class Daemon(ControlRequests):
         systemd's notification socket (from the environment by default).
     tick_s
         Real seconds between turns of the main loop.
+    lock
+        The hardware lock, if the caller took it (``reachd`` does, before anything else).
     """
 
     def __init__(
@@ -84,6 +85,7 @@ class Daemon(ControlRequests):
         kinds: KindRegistry = STANDARD_KINDS,
         notifier: Notifier | None = None,
         tick_s: float = 0.5,
+        lock: HardwareLock | None = None,
     ) -> None:
         self.site = site
         self.clock = clock
@@ -96,7 +98,7 @@ class Daemon(ControlRequests):
         self.watchdog = Watchdog(self.notifier)
         self.queue = JobQueue(directories.state / "queue.json")
         self.timers = Timers(site.daemon, site.longitude_deg, directories.state / "timers.json")
-        self.lock = HardwareLock(directories.state, f"reachd ({site.source})")
+        self.lock = lock or HardwareLock(directories.state, f"reachd ({site.source})")
         self.server = ControlServer(directories.runtime / SOCKET_FILE, self.dispatch)
         self.alarms = {}
         states = list(TRANSITIONS)
@@ -122,17 +124,22 @@ class Daemon(ControlRequests):
         self._status = ""
 
     # ----------------------------------------------------------------- life cycle
-    def start(self) -> None:
-        """Lock, recover, go safe, catch up with the timers, serve the socket, be ready."""
+    def start(self, made_safe: str | None = None) -> None:
+        """Lock, go safe, recover, catch up with the timers, serve the socket, be ready.
+
+        ``made_safe`` says the caller took the lock and commanded the safe state itself
+        (``reachd`` does both before it imports the daemon): ``""`` when the front-end
+        answered, what went wrong otherwise.
+        """
         self.dirs.create()
-        self.lock.acquire()
+        if made_safe is None:
+            self.lock.acquire()
+            made_safe = self._try_safe()
+        if made_safe:
+            self._link_failed(f"front-end unreachable at start: {made_safe}")
+        self._recover()
         # The first sidereal time costs a second (astropy's tables): not in a first run.
         apparent_lst_h([self.clock.now()], self.site.longitude_deg)
-        self._recover()
-        try:
-            self._go_safe()
-        except (ReceiverError, OSError) as err:
-            self._link_failed(f"front-end unreachable at start: {err}")
         for trigger in self.timers.start(self.clock.now()):
             self._queue_timer(trigger)
         self._check_timers()

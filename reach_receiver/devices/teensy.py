@@ -393,6 +393,20 @@ class Teensy:
         """Put the front-end in its safe state (PROTOCOL.md) and return the state."""
         return self._remember(FrontEndState.parse(self.command("safe")))
 
+    @classmethod
+    def command_safe(cls, port: str, timeout_s: float) -> FrontEndState:
+        """Open ``port``, command the safe state, close it: nothing else of the receiver.
+
+        The daemon's first act at start, before it imports the rest of itself: the
+        front-end a crash left powered goes safe within a second of the process starting.
+        """
+        teensy = cls(port, timeout_s=timeout_s)
+        teensy.connect()
+        try:
+            return teensy.safe()
+        finally:
+            teensy.close()
+
     def _remember(self, state: FrontEndState) -> FrontEndState:
         self.last_state = (time.monotonic(), state)
         return state

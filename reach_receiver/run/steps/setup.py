@@ -246,8 +246,12 @@ class SafeKind(RunnableKind[Safe]):
         board.release()
 
     def execute(self, step: Safe, run: RunContext) -> None:
-        """The front-end's safe state."""
-        run.instruments.frontend.safe()
+        """The front-end's safe state, through the run's link or one opened for it.
+
+        ``safe`` needs nothing before it: a schedule of just ``steps: [safe]`` is the
+        way to make the front-end safe from a script or a timer.
+        """
+        run.instruments.make_safe()
 
 
 # --------------------------------------------------------------------------- temperatures
