@@ -12,28 +12,42 @@ before it imports the run layer).
 
 from __future__ import annotations
 
+import importlib
+import signal
+import sys
 from collections.abc import Sequence
+
+#: Exit status of a command stopped by SIGINT before it could say more (128 + 2).
+INTERRUPTED = 128 + signal.SIGINT
+
+
+def _main(program: str, module: str, function: str, argv: Sequence[str] | None) -> int:
+    """Import a command's module and run it; a Ctrl-C while it loads is one line.
+
+    Not a traceback: the command had done nothing yet. (A run's own Ctrl-C is the run
+    layer's: the front-end safe, the run file closed.)
+    """
+    try:
+        main = getattr(importlib.import_module(module, __name__), function)
+        return int(main(argv))
+    except KeyboardInterrupt:
+        print(f"{program}: interrupted", file=sys.stderr)
+        return INTERRUPTED
 
 
 def reachd_main(argv: Sequence[str] | None = None) -> int:
     """``reachd`` (:mod:`.reachd`)."""
-    from .reachd import reachd_main as main
-
-    return main(argv)
+    return _main("reachd", ".reachd", "reachd_main", argv)
 
 
 def run_main(argv: Sequence[str] | None = None) -> int:
     """``reach-run`` (:mod:`.run`)."""
-    from .run import run_main as main
-
-    return main(argv)
+    return _main("reach-run", ".run", "run_main", argv)
 
 
 def sim_main(argv: Sequence[str] | None = None) -> int:
     """``reach-sim`` (:mod:`.sim`)."""
-    from .sim import sim_main as main
-
-    return main(argv)
+    return _main("reach-sim", ".sim", "sim_main", argv)
 
 
 __all__ = ["reachd_main", "run_main", "sim_main"]

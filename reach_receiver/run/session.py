@@ -41,7 +41,7 @@ from reach_receiver.schedule.kinds import KindRegistry
 from reach_receiver.schedule.lst import apparent_lst_h
 from reach_receiver.schedule.steps import Schedule, Step
 from reach_receiver.schedule.timing import TimelineEntry, timeline
-from reach_receiver.store.parts import FILE_MODE, PARTS_DIR
+from reach_receiver.store.parts import FILE_MODE, PARTS_DIR, StoreError, safe_name
 from reach_receiver.store.run_store import RunStore, software_versions
 from reach_receiver.store.space import DiskFull
 
@@ -104,12 +104,21 @@ def plan(
 
 
 def _unique_directory(parent: Path, name: str, now_utc: datetime) -> Path:
+    """A new directory ``<UTC time>-<name>`` in ``parent``, and never outside it.
+
+    The schedule's name is anyone's text (a daemon takes schedules from its whole group):
+    it becomes a file name (:func:`~reach_receiver.store.parts.safe_name`: no ``/``, no
+    leading dot), and the result is checked to lie directly in ``parent``.
+    """
     stamp = now_utc.strftime("%Y%m%dT%H%M%SZ")
+    name = safe_name(name)
     directory = parent / f"{stamp}-{name}"
     suffix = 1
     while directory.exists():  # two runs started within one second
         suffix += 1
         directory = parent / f"{stamp}-{name}-{suffix}"
+    if directory.resolve().parent != parent.resolve():
+        raise StoreError(f"the run directory {directory} would not lie in {parent}")
     return directory
 
 
