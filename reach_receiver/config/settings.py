@@ -16,6 +16,7 @@ receiver: longer, to keep the packet rate of a compressed clock manageable).
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal, TypeVar
@@ -39,6 +40,8 @@ def _range(
 
 
 _POSITIVE = _range(0.0, open_low=True)
+#: Field metadata: the text must be an IPv4 address written as four numbers.
+_IPV4 = {"ipv4": True}
 _TIMEOUT = _range(0.0, 600.0, open_low=True)
 
 
@@ -85,11 +88,21 @@ class Tc08Settings:
 
 @dataclass(frozen=True)
 class SpectrometerSettings:
-    """The iTPM's spectra: where they arrive, how long each integrates, channel width."""
+    """The iTPM's spectra: where they arrive, who sends them, how long each integrates.
+
+    ``host`` is the local address bound (the interface on the iTPM's network; 0.0.0.0:
+    every interface). ``source`` is the iTPM's own IPv4 address: datagrams from any other
+    sender are counted and dropped, never assembled into a spectrum, and ``source_port``
+    (0: any) narrows that to the iTPM's sending port. Without a source every sender is
+    taken; the driver then logs a warning at each connection unless it listens on
+    loopback only (where only this computer's processes can send).
+    """
 
     period_s: float = field(metadata=_range(0.0, 3600.0, open_low=True))
-    host: str = "0.0.0.0"
+    host: str = field(default="0.0.0.0", metadata=_IPV4)
     port: int = field(default=4660, metadata=_range(1, 65535))
+    source: str | None = field(default=None, metadata=_IPV4)
+    source_port: int = field(default=0, metadata=_range(0, 65535))
     timeout_s: float = field(default=5.0, metadata=_TIMEOUT)
     channel_width_hz: float = field(default=ITPM_CHANNEL_WIDTH_HZ, metadata=_POSITIVE)
 
@@ -149,6 +162,16 @@ def read_settings(schema: type[T], section: Fields) -> T | None:
             values[name] = section.choice(name, [str(c) for c in choices], default)
         else:  # str or str | None
             values[name] = section.text(name, default)
+            if meta.get("ipv4") and values[name] is not None:
+                _check_ipv4(section, name, values[name])
     if section.failed:
         return None
     return schema(**values)
+
+
+def _check_ipv4(section: Fields, name: str, value: str) -> None:
+    """Report ``value`` unless it is an IPv4 address (a host name would need a lookup)."""
+    try:
+        ipaddress.IPv4Address(value)
+    except ValueError:
+        section.report(name, f"must be an IPv4 address such as 192.168.10.30, not {value!r}")

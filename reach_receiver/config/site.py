@@ -9,7 +9,8 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
       vna: {resource: "TCPIP0::192.168.10.20::5025::SOCKET", timeout_s: 20}
       tec: {via: teensy}              # or {via: serial, port: /dev/ttyUSB0}
       tc08: {library: /opt/picotech/lib/libusbtc08.so}
-      spectrometer: {host: 0.0.0.0, port: 4660, period_s: 1.0}   # period_s required
+      spectrometer: {host: 192.168.10.1, port: 4660, source: 192.168.10.30, period_s: 1.0}
+                                      # period_s required; source: the iTPM's address
     calibration: {band_hz: [50.0e+6, 130.0e+6], solver: radiometric}   # the engine's band
                                   # and solver (the defaults; calibration.solvers.METHODS);
                                   # corrections: reach_receiver.config.corrections

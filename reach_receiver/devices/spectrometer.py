@@ -12,6 +12,9 @@ packets sharing one timestamp (packet layout and channel order:
   packets counted as lost; its data are never mixed with another heap's;
 * counts and ignores duplicates (also of a heap already delivered), packets of heaps
   already dropped or flushed, and malformed datagrams; none of these raises;
+* takes datagrams only from the iTPM's address when given one (``source``): those of
+  any other sender are dropped by the transport and counted as ``packets_foreign``,
+  so a spoofed or stray stream is never mixed into a spectrum;
 * returns float64 spectra in physical channel order, shape (n_inputs, n_channels).
 
 :meth:`Spectrometer.integrate` flushes what was queued before the request, skips
@@ -24,6 +27,7 @@ the clock.
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import time
 from collections import OrderedDict
@@ -86,7 +90,7 @@ class AccumulatedSpectrum:
         Timestamp of every averaged spectrum, in arrival order.
     requested_at
         Clock time when the integration was asked for.
-    packets_lost, packets_duplicated, packets_malformed, heaps_dropped
+    packets_lost, packets_duplicated, packets_malformed, heaps_dropped, packets_foreign
         Counted while this integration ran (flush included).
     """
 
@@ -102,11 +106,16 @@ class AccumulatedSpectrum:
     packets_duplicated: int
     packets_malformed: int
     heaps_dropped: int
+    packets_foreign: int = 0
 
 
 @dataclass(frozen=True)
 class SpectrometerStatistics:
-    """Counters since :meth:`Spectrometer.connect` (a snapshot)."""
+    """Counters since :meth:`Spectrometer.connect` (a snapshot).
+
+    ``packets_received`` counts the source's datagrams only; ``packets_foreign`` those of
+    other senders, dropped unread.
+    """
 
     packets_received: int = 0
     packets_malformed: int = 0
@@ -116,6 +125,7 @@ class SpectrometerStatistics:
     packets_lost: int = 0
     spectra_completed: int = 0
     heaps_dropped: int = 0
+    packets_foreign: int = 0
 
 
 class _Heap:
@@ -139,6 +149,9 @@ class Spectrometer:
     transport
         A :class:`~reach_receiver.transports.udp.UdpReceiver`, or the (host, port) to
         bind one to.
+    source, source_port
+        With a (host, port) transport: the iTPM's IPv4 address, the only sender whose
+        datagrams are taken, and its UDP port (0: any); None takes every sender's.
     n_channels, n_inputs
         Spectrum shape the firmware sends (16384 channels, 2 inputs for REACH).
     timeout_s
@@ -162,6 +175,8 @@ class Spectrometer:
         self,
         transport: UdpReceiver | tuple[str, int] = ("0.0.0.0", spead.DEFAULT_PORT),
         *,
+        source: str | None = None,
+        source_port: int = 0,
         n_channels: int = 16384,
         n_inputs: int = 2,
         timeout_s: float = 5.0,
@@ -172,9 +187,14 @@ class Spectrometer:
         name: str = "itpm",
     ) -> None:
         if isinstance(transport, UdpReceiver):
+            if source is not None:
+                raise ValueError("give the source address to the UdpReceiver passed")
             self.transport = transport
         else:
-            self.transport = UdpReceiver(transport[0], transport[1], device=name)
+            host, port = transport
+            self.transport = UdpReceiver(
+                host, port, source=source, source_port=source_port, device=name
+            )
         if not timeout_s > 0:
             raise ValueError(f"timeout_s must be positive, got {timeout_s}")
         self.name = name
@@ -213,12 +233,18 @@ class Spectrometer:
         self._lost = 0
         self._completed = 0
         self._dropped = 0
+        self._foreign_base = self.transport.foreign
 
     # -- connection -------------------------------------------------------------------
 
     def connect(self) -> None:
-        """Bind the UDP socket; counters start from zero."""
+        """Bind the UDP socket; counters start from zero.
+
+        Logs whose datagrams are taken: a warning when that is anyone's on an address
+        other than loopback (where any host of the network could feed the spectra).
+        """
         self.transport.open()
+        self._log_sender()
         self._heaps.clear()
         self._retired.clear()
         self._sync_time = None
@@ -226,6 +252,25 @@ class Spectrometer:
         self._period_estimate = None
         self._last_stamp = None
         self._reset_counters()
+
+    def _log_sender(self) -> None:
+        transport = self.transport
+        host, port = transport.address
+        if transport.source is not None:
+            logger.info("%s: spectra on UDP %s:%d from %s only", self.name, host, port,
+                        transport.sender)
+            return
+        try:
+            loopback = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            loopback = False
+        log = logger.info if loopback else logger.warning
+        log(
+            "%s: spectra on UDP %s:%d are taken from any sender: set "
+            "devices.spectrometer.source to the iTPM's address so that no other host's "
+            "datagrams can enter a spectrum",
+            self.name, host, port,
+        )
 
     def close(self) -> None:
         """Close the socket."""
@@ -260,6 +305,7 @@ class Spectrometer:
             packets_lost=self._lost,
             spectra_completed=self._completed,
             heaps_dropped=self._dropped,
+            packets_foreign=self.transport.foreign - self._foreign_base,
         )
 
     # -- reading ----------------------------------------------------------------------
@@ -505,4 +551,5 @@ class Spectrometer:
             packets_duplicated=after.packets_duplicated - before.packets_duplicated,
             packets_malformed=after.packets_malformed - before.packets_malformed,
             heaps_dropped=after.heaps_dropped - before.heaps_dropped,
+            packets_foreign=after.packets_foreign - before.packets_foreign,
         )

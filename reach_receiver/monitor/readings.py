@@ -130,6 +130,8 @@ def spectrometer_readings(
         Reading("reach_spectrometer_packets_received_total", stats.packets_received, "1", t),
         Reading("reach_spectrometer_packets_lost_total", stats.packets_lost, "1", t),
         Reading("reach_spectrometer_packets_duplicated_total", stats.packets_duplicated, "1", t),
+        # Datagrams of senders other than the site's iTPM, dropped unread.
+        Reading("reach_spectrometer_packets_foreign_total", stats.packets_foreign, "1", t),
         Reading("reach_spectrometer_spectra_total", stats.spectra_completed, "1", t),
     ]
     if previous is not None:

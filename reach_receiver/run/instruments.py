@@ -76,7 +76,8 @@ class Instruments:
         vna = Vna(settings.vna.resource, timeout_s=settings.vna.timeout_s, clock=clock)
         itpm = settings.spectrometer
         spectrometer = Spectrometer(
-            (itpm.host, itpm.port), timeout_s=itpm.timeout_s, clock=clock, period_s=itpm.period_s
+            (itpm.host, itpm.port), source=itpm.source, source_port=itpm.source_port,
+            timeout_s=itpm.timeout_s, clock=clock, period_s=itpm.period_s,
         )
         library = _LazyLibrary(settings.tc08.library)
         tc08 = Tc08(library, clock, mains_hz=settings.tc08.mains_hz)  # type: ignore[arg-type]

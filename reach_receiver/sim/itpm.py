@@ -5,6 +5,8 @@ lists what was confirmed against REACH's and SKA's code and what was assumed). E
 ``period_s`` of the clock's time the simulator asks its spectrum source for the power
 spectrum integrated over the period just ended, stamps it with the period's start, and
 sends its packets to the receiver's address, as the iTPM does once per integration.
+It sends from one fixed address and port (:attr:`ItpmSimulator.sender`, loopback by
+default), which the simulated site names as the spectra's only source.
 
 Faults can be switched at run time (:meth:`ItpmSimulator.set_faults`): lost, duplicated
 or reordered packets, garbage datagrams, and a stall (nothing sent). They are drawn from
@@ -166,6 +168,9 @@ class ItpmSimulator:
         makes a 1 s integration take ``1 / factor`` real seconds.
     address
         The receiver's (host, port).
+    sender
+        The (host, port) it sends from; port 0 lets the kernel choose one at the first
+        :meth:`bind`, kept for later starts (read it from :attr:`sender`).
     period_s
         Integration time of one spectrum, clock seconds.
     faults
@@ -184,6 +189,7 @@ class ItpmSimulator:
         period_s: float = 1.0,
         faults: ItpmFaults | None = None,
         *,
+        sender: tuple[str, int] = ("127.0.0.1", 0),
         seed: int = 0,
         floating_point: bool = True,
     ) -> None:
@@ -192,6 +198,7 @@ class ItpmSimulator:
         self.source = spectrum_source
         self.clock = clock
         self.address = address
+        self.sender = sender
         self.period_s = float(period_s)
         self.floating_point = floating_point
         self.stats = ItpmSimulatorStats()
@@ -213,14 +220,31 @@ class ItpmSimulator:
         return self._faults
 
     def start(self) -> None:
-        """Open the sending socket and start streaming."""
+        """Bind the sending socket to :attr:`sender` and start streaming."""
         if self._thread is not None:
             return
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 * 1024 * 1024)
+        self.bind()
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="itpm-simulator", daemon=True)
         self._thread.start()
+
+    def bind(self) -> tuple[str, int]:
+        """Open the sending socket at :attr:`sender` (once); return the address it sends from.
+
+        Called by :meth:`start`; call it before to learn the port the kernel chose.
+        """
+        if self._sock is None:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4 * 1024 * 1024)
+                sock.bind(self.sender)
+            except OSError:
+                sock.close()
+                raise
+            self._sock = sock
+            host, port = sock.getsockname()[:2]
+            self.sender = (str(host), int(port))
+        return self.sender
 
     def stop(self, timeout_s: float = 5.0) -> None:
         """Stop streaming, join the thread and close the socket."""

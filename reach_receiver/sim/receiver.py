@@ -15,7 +15,9 @@ Every simulator reads the same :class:`~.physics.ReceiverPhysics`: the firmware'
 changes tell it which way the switches point, the TEC's plate is the enclosure's
 temperature, and the VNA and the spectrometer see whatever the switches connect. All
 share one clock, compressed in dry runs so that hours of integration take seconds while
-the spectra carry the radiometer noise of hours.
+the spectra carry the radiometer noise of hours. Every simulator listens on, and sends
+from, loopback only, and the site names the simulated iTPM's address and port as the
+spectra's only source.
 """
 
 from __future__ import annotations
@@ -54,6 +56,8 @@ log = logging.getLogger(__name__)
 
 #: Simulated seconds per real second of a dry run: an hour of integration in 1.2 s.
 DEFAULT_COMPRESSION = 3000.0
+#: Where every simulator listens and sends from: nothing of a simulation reaches the network.
+LOOPBACK = "127.0.0.1"
 #: Spectra a real second the simulated iTPM sends at most (see spectrum_period_for).
 MAX_SPECTRA_PER_REAL_S = 100.0
 
@@ -107,7 +111,9 @@ def simulated_site(
             vna=VnaSettings(resource="<simulated>"),
             tec=TecSettings(via="teensy"),
             tc08=Tc08Settings(),
-            spectrometer=SpectrometerSettings(period_s=settings.spectrum_period_s),
+            spectrometer=SpectrometerSettings(
+                period_s=settings.spectrum_period_s, host=LOOPBACK, source=LOOPBACK
+            ),
         )
     return SiteConfig(
         devices=devices,
@@ -119,7 +125,7 @@ def simulated_site(
     )
 
 
-def free_udp_port(host: str = "127.0.0.1") -> int:
+def free_udp_port(host: str = LOOPBACK) -> int:
     """A UDP port nobody is bound to right now."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind((host, 0))
@@ -151,7 +157,7 @@ class SimulatedReceiver:
     ) -> None:
         self.settings = settings or SimulationSettings()
         self.clock = clock or CompressedClock(self.settings.compression)
-        self.spectrometer_address = ("127.0.0.1", spectrometer_port or free_udp_port())
+        self.spectrometer_address = (LOOPBACK, spectrometer_port or free_udp_port())
         self._tmp = None if workdir else tempfile.TemporaryDirectory(prefix="reach-sim-")
         self.workdir = workdir or Path(self._tmp.name if self._tmp else ".")
         s = self.settings
@@ -173,6 +179,7 @@ class SimulatedReceiver:
             self.clock,
             self.spectrometer_address,
             period_s=s.spectrum_period_s,
+            sender=(LOOPBACK, 0),
             seed=s.seed,
         )
         self.teensy: FirmwareTeensy | None = None
@@ -249,6 +256,7 @@ class SimulatedReceiver:
         if self.teensy is None or self.tc08 is None:
             raise RuntimeError("the simulated receiver is not started")
         host, port = self.spectrometer_address
+        source, source_port = self.itpm.bind()
         return simulated_site(
             self.settings,
             devices=DeviceSettings(
@@ -257,7 +265,11 @@ class SimulatedReceiver:
                 tec=TecSettings(via="teensy"),
                 tc08=Tc08Settings(library=str(self.tc08.library)),
                 spectrometer=SpectrometerSettings(
-                    period_s=self.settings.spectrum_period_s, host=host, port=port
+                    period_s=self.settings.spectrum_period_s,
+                    host=host,
+                    port=port,
+                    source=source,
+                    source_port=source_port,
                 ),
             ),
             references={"test_load": str(self.test_load_reference)},
