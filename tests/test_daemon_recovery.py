@@ -283,3 +283,35 @@ def test_a_carried_calibration_names_the_copies_of_what_it_used(completed_quick,
                  for n in [after["measurements"][k].attrs["sequence"]]}
         assert names[used["s11"]["lna"]] == "lna"
         assert {names[n] for n in used["cycles"]["hot"]} == {"hot"}
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM])
+def test_a_run_stopped_by_a_restart_carries_on_after_it(reach_sim, tmp_path, sig):
+    # systemctl restart (SIGTERM) or a reboot: the run stops cooperatively, and with
+    # resume: true the schedule goes on from where it stopped once the daemon is back.
+    schedule = tmp_path / "resumable.yaml"
+    schedule.write_text(SCHEDULE)
+    site = site_file(tmp_path, reach_sim, resume=True)
+    reachd = start_reachd(site)
+    assert run_main(["--site", str(site), str(schedule), "--detach"]) == 0
+    runs = tmp_path / "state" / "runs"
+    wait(lambda: runs.exists() and any(
+        sum(p.kind == "dicke" for p in list_parts(d)) >= 2 for d in runs.iterdir()))
+    code, log = finish(reachd, sig)
+    assert code == 0, log
+    again = start_reachd(site)
+    done = wait(lambda: [j for j in jobs(tmp_path) if j["state"] in ("completed", "failed")])
+    code, log = finish(again)
+    assert code == 0, log
+    (resumed,) = done
+    assert resumed["state"] == "completed", resumed["reason"]
+    assert resumed["origin"] == "resumption of job 1"
+    first = next(j for j in jobs_file(tmp_path) if j["id"] == 1)
+    assert first["state"] == "interrupted"
+    contents = read_run_file(Path(resumed["run"]) / "run.h5")
+    measured = [(m.kind, m.name) for m in contents.measurements if m.kind in ("dicke", "s11")]
+    assert sorted(measured) == sorted(EXPECTED)
+
+
+def jobs_file(root: Path) -> list[dict]:
+    return json.loads((root / "state" / "queue.json").read_text())["jobs"]
