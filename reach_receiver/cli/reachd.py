@@ -167,9 +167,13 @@ def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
         print(f"reachd: status page {daemon.page.url}", flush=True)
     print(f"reachd: serving {dirs.runtime / 'control.sock'} ({daemon.machine.state})", flush=True)
     try:
-        daemon.serve()
+        clean = daemon.serve()
     finally:
         daemon.close()
+    if not clean:
+        print("reachd: stopped by an internal error (the journal has its traceback); "
+              "the front-end was commanded safe", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -29,6 +29,7 @@ the control socket, :mod:`.faults` the front-end's faults and the recovery of jo
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 
@@ -51,6 +52,8 @@ from .running import schedule_reader
 from .states import TRANSITIONS, StateMachine
 from .status_page import StatusPage
 from .timers import Timers
+
+log = logging.getLogger(__name__)
 
 __all__ = ["BACKOFF_S", "Daemon", "Directories", "schedule_reader"]
 
@@ -151,10 +154,21 @@ class Daemon(ControlRequests):
             self.machine.go("idle", "started: front-end safe, socket open")
         self.notifier.ready(self.status_line())
 
-    def serve(self) -> None:
-        """The main loop, until :meth:`halt`; then the current run is stopped safely."""
-        while not self._halt.wait(self.tick_s):
-            self.tick()
+    def serve(self) -> bool:
+        """The main loop, until :meth:`halt`; then the current run is stopped safely.
+
+        A failure of the loop itself (a bug; nothing a client sends reaches it) stops
+        the daemon the same way, the front-end commanded safe once more after the run's
+        own stop; returns whether the loop ended by :meth:`halt` (``False``: it failed).
+        """
+        failure = None
+        try:
+            while not self._halt.wait(self.tick_s):
+                self.tick()
+        except Exception as err:
+            failure = f"the main loop failed: {type(err).__name__}: {err}"
+            log.critical("%s", failure, exc_info=True)
+            self._halt_reason = self._halt_reason or failure
         self.machine.go("stopping", self._halt_reason)
         self.notifier.stopping(f"stopping: {self._halt_reason}")
         if self.session is not None:
@@ -162,6 +176,9 @@ class Daemon(ControlRequests):
         if self._worker is not None:
             self._worker.join()
         self._collect()
+        if failure is not None and (problem := self._try_safe()):
+            log.critical("front-end: cannot command the safe state: %s", problem)
+        return failure is None
 
     def halt(self, reason: str) -> None:
         """Stop: the current run cooperatively (safe from a signal handler)."""
