@@ -6,22 +6,34 @@ or are not readable by the daemon's user. The queue is one JSON file in the stat
 directory, rewritten atomically (temporary file, fsync, rename) on every change, so a
 crash or a power cut finds the queue as it was: queued jobs run after the restart, and a
 job that was running is found and marked interrupted by recovery.
+
+A queue file that cannot be written (a full disk) keeps its previous contents: the
+daemon goes on with the queue in memory, logs the failure once, names it in
+:attr:`JobQueue.write_error`, and writes the queue again at the next change or
+:meth:`JobQueue.retry` (the main loop's turn).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import threading
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 from calibration.atomic_file import write_atomically
 
+log = logging.getLogger(__name__)
+
 JobState = Literal["queued", "running", "completed", "failed", "interrupted", "cancelled"]
 ENDED: tuple[JobState, ...] = ("completed", "failed", "interrupted", "cancelled")
 #: Ended jobs kept in the queue file for ``queue`` replies.
 KEEP_ENDED = 50
+#: Real seconds between attempts to write a queue file that could not be written (a
+#: failed attempt on a full disk costs one small temporary file, removed at once).
+RETRY_S = 2.0
 
 
 @dataclass
@@ -62,6 +74,9 @@ class JobQueue:
         self._lock = threading.RLock()
         self._jobs: list[Job] = []
         self._next = 1
+        #: Why the last write of the queue file failed (``None``: it is up to date).
+        self.write_error: str | None = None
+        self._failed_at = 0.0
         if self.path.exists():
             data = json.loads(self.path.read_text())
             self._jobs = [Job(**job) for job in data["jobs"]]
@@ -113,10 +128,30 @@ class JobQueue:
             return job
 
     def save(self) -> None:
-        """Write the queue atomically (ended jobs beyond the last few are forgotten)."""
+        """Write the queue atomically (ended jobs beyond the last few are forgotten).
+
+        A write that fails keeps the previous file; the queue stays as it is in memory.
+        """
         with self._lock:
             ended = [j for j in self._jobs if j.state in ENDED]
             for old in ended[:-KEEP_ENDED]:
                 self._jobs.remove(old)
             text = json.dumps({"next_id": self._next, "jobs": [asdict(j) for j in self._jobs]})
-            write_atomically(self.path, text)
+            try:
+                write_atomically(self.path, text)
+            except OSError as err:
+                self._failed_at = time.monotonic()
+                error = f"{self.path}: not written, its previous state kept ({err.strerror or err})"
+                if error != self.write_error:
+                    log.error("%s", error)
+                self.write_error = error
+                return
+            if self.write_error is not None:
+                log.warning("%s: written again", self.path)
+            self.write_error = None
+
+    def retry(self) -> None:
+        """Write the queue again if its last write failed (at most every :data:`RETRY_S`)."""
+        with self._lock:
+            if self.write_error is not None and time.monotonic() - self._failed_at >= RETRY_S:
+                self.save()

@@ -205,6 +205,7 @@ class Daemon(ControlRequests):
         with self._loop:
             self.watchdog.feed(self.healthy())
             self._collect()
+            self.queue.retry()  # a queue file a full disk refused, written once there is room
             now = self.clock.now()
             for trigger in self.timers.due(now):
                 self._queue_timer(trigger)

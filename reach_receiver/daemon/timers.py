@@ -10,6 +10,10 @@ fired and when the timers were last looked at. An occurrence that passed while t
 daemon was down is *missed*: with ``policy: late`` it fires at start if it is at most
 ``window_s`` old, otherwise (or with ``policy: skip``) it is skipped, with a log line
 either way. The first start ever fires nothing from the past.
+
+A ``timers.json`` that cannot be written (a full disk) keeps its previous contents: the
+daemon goes on with the timers' state in memory, logs the failure once, names it in
+:attr:`Timers.write_error` and writes again at the next checkpoint.
 """
 
 from __future__ import annotations
@@ -74,6 +78,8 @@ class Timers:
         self.path = Path(path)
         self.fired: dict[str, float] = {}
         self.checked: float | None = None
+        #: Why the last write of the state file failed (``None``: it is up to date).
+        self.write_error: str | None = None
         self._written = -float("inf")
         if self.path.exists():
             state = json.loads(self.path.read_text())
@@ -128,8 +134,18 @@ class Timers:
 
     def _save(self, now: float) -> None:
         self.checked = now
-        self._written = now
-        write_atomically(self.path, json.dumps({"fired": self.fired, "checked": now}))
+        self._written = now  # a failed write is tried again at the next checkpoint
+        try:
+            write_atomically(self.path, json.dumps({"fired": self.fired, "checked": now}))
+        except OSError as err:
+            error = f"{self.path}: not written, its previous state kept ({err.strerror or err})"
+            if error != self.write_error:
+                log.error("%s", error)
+            self.write_error = error
+            return
+        if self.write_error is not None:
+            log.warning("%s: written again", self.path)
+        self.write_error = None
 
 
 def _utc(at: float) -> str:

@@ -24,13 +24,20 @@ when opened.
 
 Durability: WAL with ``synchronous=FULL``; every batch of readings is one transaction,
 so a ``kill -9`` or a power cut loses at most the batch being written, and the file is
-never left half-written. :meth:`MetricsDatabase.maintain` down-samples the complete
-15-minute buckets and applies the retention (minute data ``minute_days``, 15-minute
-data ``quarter_days``).
+never left half-written. On a full disk (SQLite's "database or disk is full", an I/O
+error) a batch is dropped rather than raised into the sampler or a run: the file keeps
+what it had, the failure is logged once and named in :attr:`MetricsDatabase.write_error`,
+and writing resumes by itself once there is room. Readings also give way to the runs'
+measurements: below :data:`KEEP_FREE_BYTES` free a batch is dropped before SQLite
+is asked, so that the room a run keeps for the records that close it stays free.
+
+:meth:`MetricsDatabase.maintain` down-samples the complete 15-minute buckets and
+applies the retention (minute data ``minute_days``, 15-minute data ``quarter_days``).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import sqlite3
 import threading
@@ -39,7 +46,12 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+from reach_receiver.store.parts import RESERVE_BYTES
+from reach_receiver.store.space import MARGIN_BYTES, DiskFull, free_bytes
+
 from .readings import STATUSES, Reading, parse_key
+
+log = logging.getLogger(__name__)
 
 #: Width of a down-sampled bucket (s).
 QUARTER_S = 900
@@ -60,6 +72,19 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value REAL);
 #: ``PRAGMA user_version`` of the layout above (0: minute times in whole seconds).
 SCHEMA_VERSION = 1
 MS = 1000
+#: Free space under which readings are dropped: the runs' reserve, and as much again.
+KEEP_FREE_BYTES = 2 * (RESERVE_BYTES + MARGIN_BYTES)
+#: SQLite's primary result codes of a write the disk had no room for.
+_SQLITE_FULL, _SQLITE_IOERR = 13, 10
+
+
+def disk_trouble(err: sqlite3.Error) -> bool:
+    """Whether ``err`` is SQLite's "database or disk is full" or an I/O error."""
+    code = getattr(err, "sqlite_errorcode", None)
+    if code is not None:
+        return (code & 0xFF) in (_SQLITE_FULL, _SQLITE_IOERR)
+    text = str(err).lower()
+    return "disk is full" in text or "disk i/o error" in text
 
 
 @dataclass(frozen=True)
@@ -85,14 +110,23 @@ class MetricsDatabase:
         self.path = Path(path)
         self.minute_days = minute_days
         self.quarter_days = quarter_days
+        #: Why the last batch was dropped (``None``: the file takes what it is given).
+        self.write_error: str | None = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
         self._lock = threading.Lock()
         with self._lock:
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.executescript(_SCHEMA)
-            self._upgrade()
+            try:
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=FULL")
+                self._db.executescript(_SCHEMA)
+                self._upgrade()
+            except sqlite3.Error as err:
+                self._db.close()
+                if disk_trouble(err):
+                    raise DiskFull(f"{self.path}: cannot be opened ({err}: no room left?)",
+                                   self.path.parent, None, 0) from err
+                raise
         self._ids: dict[str, int] = dict(self._db.execute("SELECT key, id FROM series"))
 
     def _upgrade(self) -> None:
@@ -108,10 +142,29 @@ class MetricsDatabase:
         self._db.execute("COMMIT")
 
     def close(self) -> None:
-        """Checkpoint and close the file."""
+        """Checkpoint and close the file (on a full disk the log stays beside it)."""
         with self._lock:
-            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            try:
+                self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            except sqlite3.Error as err:  # the WAL is read back at the next open
+                log.warning("%s: not checkpointed at close (%s)", self.path, err)
             self._db.close()
+
+    def _rollback(self) -> None:
+        if self._db.in_transaction:  # SQLite may have rolled back on its own already
+            self._db.execute("ROLLBACK")
+        self._ids = dict(self._db.execute("SELECT key, id FROM series"))
+
+    def _dropped(self, what: str, err: sqlite3.Error | str) -> None:
+        error = f"{self.path}: {what} not stored ({err})"
+        if self.write_error is None:
+            log.error("%s; stored again once there is room", error)
+        self.write_error = error
+
+    def _stored(self) -> None:
+        if self.write_error is not None:
+            log.warning("%s: readings stored again", self.path)
+            self.write_error = None
 
     def _series_id(self, reading: Reading) -> int:
         key = reading.key
@@ -125,10 +178,18 @@ class MetricsDatabase:
         return found
 
     def write(self, readings: Iterable[Reading]) -> int:
-        """Store a batch of readings in one transaction; returns how many."""
+        """Store a batch of readings in one transaction; returns how many.
+
+        0 when the disk has no room: the batch is dropped (:attr:`write_error`).
+        """
         with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
+            free = free_bytes(self.path.parent)
+            if free < KEEP_FREE_BYTES:
+                self._dropped("readings", f"no space left on device: {free // 1024} kB free, "
+                                          f"kept for the runs' measurements")
+                return 0
             try:
+                self._db.execute("BEGIN IMMEDIATE")
                 rows = [
                     (self._series_id(r), round(r.timestamp * MS), _milli(r.value),
                      STATUSES.index(r.status))
@@ -136,10 +197,16 @@ class MetricsDatabase:
                 ]
                 self._db.executemany("INSERT OR REPLACE INTO minute VALUES (?, ?, ?, ?)", rows)
                 self._db.execute("COMMIT")
+            except sqlite3.Error as err:
+                self._rollback()
+                if not disk_trouble(err):
+                    raise
+                self._dropped("readings", err)
+                return 0
             except BaseException:
-                self._db.execute("ROLLBACK")
-                self._ids = dict(self._db.execute("SELECT key, id FROM series"))
+                self._rollback()
                 raise
+            self._stored()
         return len(rows)
 
     # ----------------------------------------------------------------- maintenance
@@ -156,31 +223,42 @@ class MetricsDatabase:
             if start is None or start >= end:
                 return 0
             start -= start % QUARTER_S
-            self._db.execute("BEGIN IMMEDIATE")
-            written = 0
-            for series_id in self._ids.values():
-                cursor = self._db.execute(
-                    "INSERT OR REPLACE INTO quarter "
-                    "SELECT series, t / ? - t / ? % ?, round(avg(milli)), min(milli), "
-                    "max(milli), count(milli), max(status) FROM minute "
-                    "WHERE series = ? AND t >= ? AND t < ? GROUP BY t / ? - t / ? % ?",
-                    (MS, MS, QUARTER_S, series_id, start * MS, end * MS, MS, MS, QUARTER_S),
-                )
-                written += max(cursor.rowcount, 0)
-            minute_cut = int(now - self.minute_days * DAY_S)
-            quarter_cut = int(now - self.quarter_days * DAY_S)
-            for series_id in self._ids.values():
-                self._db.execute(
-                    "DELETE FROM minute WHERE series = ? AND t < ?",
-                    (series_id, minute_cut * MS),
-                )
-                self._db.execute(
-                    "DELETE FROM quarter WHERE series = ? AND t < ?", (series_id, quarter_cut)
-                )
-            self._db.execute(
-                "INSERT OR REPLACE INTO meta VALUES ('quarter_done', ?)", (float(end),)
+            try:
+                return self._maintain(start, end, now)
+            except sqlite3.Error as err:
+                self._rollback()
+                if not disk_trouble(err):
+                    raise
+                self._dropped("15-minute means", err)
+                return 0
+
+    def _maintain(self, start: int, end: int, now: float) -> int:
+        """:meth:`maintain`'s one transaction (the lock held)."""
+        self._db.execute("BEGIN IMMEDIATE")
+        written = 0
+        for series_id in self._ids.values():
+            cursor = self._db.execute(
+                "INSERT OR REPLACE INTO quarter "
+                "SELECT series, t / ? - t / ? % ?, round(avg(milli)), min(milli), "
+                "max(milli), count(milli), max(status) FROM minute "
+                "WHERE series = ? AND t >= ? AND t < ? GROUP BY t / ? - t / ? % ?",
+                (MS, MS, QUARTER_S, series_id, start * MS, end * MS, MS, MS, QUARTER_S),
             )
-            self._db.execute("COMMIT")
+            written += max(cursor.rowcount, 0)
+        minute_cut = int(now - self.minute_days * DAY_S)
+        quarter_cut = int(now - self.quarter_days * DAY_S)
+        for series_id in self._ids.values():
+            self._db.execute(
+                "DELETE FROM minute WHERE series = ? AND t < ?",
+                (series_id, minute_cut * MS),
+            )
+            self._db.execute(
+                "DELETE FROM quarter WHERE series = ? AND t < ?", (series_id, quarter_cut)
+            )
+        self._db.execute(
+            "INSERT OR REPLACE INTO meta VALUES ('quarter_done', ?)", (float(end),)
+        )
+        self._db.execute("COMMIT")
         return written
 
     def _first_minute(self) -> int | None:

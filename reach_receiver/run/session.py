@@ -216,10 +216,7 @@ class RunSession:
             channel_width_hz=self.site.devices.spectrometer.channel_width_hz,
             band_hz=self.site.band_hz,
         )
-        store.open()
-        if self.carry_from is not None:
-            carried = carry(store, self.carry_from)
-            log.info("carried %d measurements over from %s", carried, self.carry_from)
+        self._open(store)
         self.progress.started(self.directory)
         with _run_log(self.directory / RUN_LOG):
             log.info("run %s in %s", self.schedule.name, self.directory)
@@ -239,6 +236,27 @@ class RunSession:
                 watch(self.monitor, context)
             summary = self._run(context, entries, total_s)
             return self._with_report(summary)
+
+    def _open(self, store: RunStore) -> None:
+        """Open the run file and carry the measurements over; RunFailed if it cannot be.
+
+        No device has been touched yet: a run that cannot begin (a full disk, an earlier
+        run that cannot be read) is closed as failed with the reason, if it was opened.
+        """
+        try:
+            store.open()
+            if self.carry_from is not None:
+                carried = carry(store, self.carry_from)
+                log.info("carried %d measurements over from %s", carried, self.carry_from)
+        except (ReceiverError, OSError) as err:
+            reason = f"the run did not start: {err}"
+            run_file = None
+            if store.is_open:
+                try:
+                    run_file = store.finish("failed", reason)
+                except (ReceiverError, OSError) as close_err:
+                    log.error("could not close the run file: %s", close_err)
+            raise RunFailed(reason, run_file, "failed") from err
 
     def _with_report(self, summary: RunSummary) -> RunSummary:
         """The summary with its report drawn, when the run made a calibration."""

@@ -199,6 +199,11 @@ class RunStore:
         return self._band_hz
 
     @property
+    def is_open(self) -> bool:
+        """Whether measurements can be added (opened, its end not yet recorded)."""
+        return self._state == "open"
+
+    @property
     def finished(self) -> bool:
         """Whether the run's end is recorded (its merge may still have failed)."""
         return self._state == "finished"
