@@ -39,11 +39,16 @@ from .cli_args import (
     Command,
     add_command,
     add_solver_options,
+    count_arg,
     names_arg,
+    number_arg,
     output_arg,
+    positive_float,
+    positive_int,
     solver_from_args,
 )
 from .cli_corrections import add_correction_options, corrected_solve, noise_source_line
+from .cli_files import check_outputs
 from .cli_import import add_import_command
 from .cli_report import add_report_command
 from .cli_validate import add_validate_command
@@ -62,11 +67,15 @@ from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .per_frequency import ChannelSolution
 from .polynomial_model import coefficient_slices
 from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
-from .solution import CalibratedSpectrum, Solution
+from .solution import CalibratedSpectrum, Solution, check_grid, grid_metadata
 from .solvers import AnySolution, band_hz, method_name, refit, solution_noise_floor
 from .vna_systematics import DEFAULT_CORRELATION_HZ, reflection_systematics
 
 PROG = "reach-cal"
+#: The most channels ``simulate`` makes: the iTPM's 32768 over its whole band, twice.
+MAX_SIM_CHANNELS = 65536
+#: The most Monte-Carlo refits ``apply --vna-accuracy`` makes (64 is typical).
+MAX_VNA_DRAWS = 10_000
 
 
 def _rms(values: NDArray[np.float64]) -> float:
@@ -106,6 +115,7 @@ def _calibrate(
     data, extra = read_run(run)
     source = _pick_source(data, extra, name, run)
     _check_band(solution, data, run)
+    check_grid(solution.metadata, data.freq_hz, data.channel_width_hz, run)
     spectrum = solution.calibrate(
         data.freq_hz, data.gamma_rec, source,
         data.channel_width_hz, data.gamma_rec_std,
@@ -119,9 +129,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if unknown:
         known = ", ".join(REACH_CALIBRATORS)
         raise InvalidDataError(f"unknown calibrators {unknown}; REACH has: {known}")
+    check_outputs({"-o": (args.output, "run")}, [])
     lo, hi = args.band
     if not 0 < lo < hi:
-        raise InvalidDataError(f"--band needs 0 < LO < HI (MHz), got {lo} {hi}")
+        raise InvalidDataError(f"--band needs 0 < LO < HI (MHz), got {lo:g} {hi:g}")
+    channels = (hi - lo) * 1e6 / args.channel_width_hz
+    if not 1 <= channels <= MAX_SIM_CHANNELS:
+        raise InvalidDataError(
+            f"--channel-width-hz {args.channel_width_hz:g} makes {channels:.3g} channel "
+            f"intervals over {lo:g}-{hi:g} MHz: give between 1 and {MAX_SIM_CHANNELS}"
+        )
     config = SimulationConfig(
         f_lo_hz=lo * 1e6,
         f_hi_hz=hi * 1e6,
@@ -147,6 +164,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_solve(args: argparse.Namespace) -> int:
     """Solve a run for the noise-wave parameters and write the solution."""
+    check_outputs({"-o": (args.output, "solution")}, [args.run])
     data, _ = read_run(args.run)
     if args.calibrators:
         data = data.subset(args.calibrators)
@@ -157,7 +175,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     solution = replace(
         solution,
         metadata={
-            **solution.metadata, **prepared, "run_file": str(args.run), "solve_time_s": elapsed
+            **solution.metadata, **prepared, **grid_metadata(data.freq_hz, data.channel_width_hz),
+            "run_file": str(args.run), "solve_time_s": elapsed,
         },
     )
     write_solution(args.output, solution)
@@ -215,6 +234,10 @@ def _noise_line(solution: Solution) -> str:
 
 def cmd_apply(args: argparse.Namespace) -> int:
     """Calibrate a source of a run with a solution."""
+    check_outputs(
+        {"-o": (args.output, "calibrated"), "--csv": (args.csv, "text")},
+        [args.solution, args.run],
+    )
     solution = read_solution(args.solution)
     data, source, spectrum = _calibrate(solution, args.run, args.source)
     systematics = None
@@ -341,6 +364,14 @@ def _floor_summary(solution: AnySolution, run: str, name: str) -> None:
         )
 
 
+def _draws_arg(text: str) -> int:
+    """``--vna-accuracy``: 0 (none) or 2-:data:`MAX_VNA_DRAWS` refits (argparse type)."""
+    draws = number_arg(int, 0, MAX_VNA_DRAWS)(text)
+    if draws == 1:
+        raise argparse.ArgumentTypeError("expected 0 (none) or at least 2 draws, got '1'")
+    return draws
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``reach-cal`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -357,22 +388,22 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "-o", "--output", type=output_arg, required=True, help="run file to write (HDF5)"
     )
-    sim.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    sim.add_argument("--seed", type=count_arg, default=0, help="noise seed (default 0)")
     sim.add_argument(
         "--integration-s",
-        type=float,
+        type=positive_float,
         default=600.0,
         help="integration per Dicke position, s (default 600)",
     )
     sim.add_argument(
         "--channel-width-hz",
-        type=float,
+        type=positive_float,
         default=ITPM_CHANNEL_WIDTH_HZ,
         help="channel width, Hz (default the iTPM's 12207 Hz)",
     )
     sim.add_argument(
         "--band",
-        type=float,
+        type=positive_float,
         nargs=2,
         default=(50.0, 130.0),
         metavar=("LO", "HI"),
@@ -386,7 +417,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument(
         "--vna-sigma",
-        type=float,
+        type=number_arg(float, 0.0, 1.0),
         default=0.0,
         help="noise on measured reflection coefficients (default 0)",
     )
@@ -408,21 +439,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     apply.add_argument("--csv", type=output_arg, help="calibrated spectrum to write (CSV)")
     apply.add_argument(
-        "--vna-accuracy", type=int, default=0, metavar="DRAWS",
+        "--vna-accuracy", type=_draws_arg, default=0, metavar="DRAWS",
         help="add the VNA's data-sheet accuracy (thesis table 2.3) as a systematic error, "
         "from DRAWS Monte-Carlo refits (64 is typical; 0, the default, leaves it out)",
     )
     apply.add_argument(
-        "--vna-correlation-mhz", type=float, default=DEFAULT_CORRELATION_HZ / 1e6,
+        "--vna-correlation-mhz", type=positive_float, default=DEFAULT_CORRELATION_HZ / 1e6,
         help="correlation length of that error over frequency (default %(default)g MHz)",
     )
-    apply.add_argument("--seed", type=int, default=0, help="seed of the Monte-Carlo draws")
+    apply.add_argument(
+        "--seed", type=count_arg, default=0, help="seed of the Monte-Carlo draws"
+    )
 
     summary = command("summary", cmd_summary)
     summary.add_argument("solution", help="solution file (HDF5)")
     summary.add_argument("--run", help="run file: report the noise floor of --source")
     summary.add_argument("--source", default="ant", help="source of --run (default ant)")
-    summary.add_argument("--top", type=int, default=5, help="evidence-table rows to show")
+    summary.add_argument(
+        "--top", type=positive_int, default=5, help="evidence-table rows to show (>= 1)"
+    )
     add_import_command(sub)
     add_validate_command(sub)
     add_report_command(sub)

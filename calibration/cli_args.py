@@ -8,9 +8,10 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from .data import CalibrationData
 from .errors import InvalidDataError
@@ -20,29 +21,71 @@ from .polynomial_model import Orders
 from .solvers import METHODS, AnySolution, solver
 
 __all__ = [
+    "MAX_ORDER",
     "ORDER_NAMES",
     "add_command",
     "add_solver_options",
     "names_arg",
+    "number_arg",
     "orders_arg",
     "output_arg",
     "solver_from_args",
 ]
 
 ORDER_NAMES = ", ".join(PARAMETERS)
+#: The most terms one parameter's polynomial may have: the order search's own ceiling,
+#: beyond which its Legendre terms only fit noise (and the normal equations grow as n^2).
+MAX_ORDER = OrderChoice.ceiling
 Command = Callable[[argparse.Namespace], int]
+N = TypeVar("N", int, float)
+
+
+def number_arg(
+    kind: Callable[[str], N], low: float, high: float = math.inf, *, open_low: bool = False
+) -> Callable[[str], N]:
+    """An argparse type: a finite ``kind`` (``int`` or ``float``) in ``[low, high]``.
+
+    ``open_low`` excludes ``low`` itself (``number_arg(float, 0, open_low=True)``: > 0).
+    Every numeric option of ``reach-cal`` is read through one of these, so that a
+    negative width, a NaN or a count of zero is refused before any work, by name.
+    """
+    span = f"> {low:g}" if open_low else f">= {low:g}"
+    if high < math.inf:
+        span += f" and <= {high:g}"
+    if low == -math.inf:
+        span = "(finite)" if high == math.inf else f"<= {high:g}"
+    what = "an integer" if kind is int else "a number"
+
+    def parse(text: str) -> N:
+        try:
+            value = kind(text)
+        except (ValueError, OverflowError):
+            raise argparse.ArgumentTypeError(f"expected {what} {span}, got {text!r}") from None
+        inside = (value > low if open_low else value >= low) and value <= high
+        if not (math.isfinite(value) and inside):
+            raise argparse.ArgumentTypeError(f"expected {what} {span}, got {text!r}")
+        return value
+
+    parse.__name__ = f"{what} {span}"
+    return parse
+
+
+#: The commonest kinds: a count >= 0, a count >= 1, a quantity > 0.
+count_arg = number_arg(int, 0)
+positive_int = number_arg(int, 1)
+positive_float = number_arg(float, 0.0, open_low=True)
 
 
 def orders_arg(text: str) -> Orders:
-    """Parse ``n_unc,n_cos,n_sin,n_NS,n_L`` (argparse type)."""
+    """Parse ``n_unc,n_cos,n_sin,n_NS,n_L``, each 0..:data:`MAX_ORDER` (argparse type)."""
     try:
         values = tuple(int(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != len(PARAMETERS) or min(values) < 0:
+    if len(values) != len(PARAMETERS) or not all(0 <= v <= MAX_ORDER for v in values):
         raise argparse.ArgumentTypeError(
-            f"expected {len(PARAMETERS)} comma-separated term counts >= 0 ({ORDER_NAMES}), "
-            f"got {text!r}"
+            f"expected {len(PARAMETERS)} comma-separated term counts 0-{MAX_ORDER} "
+            f"({ORDER_NAMES}; {MAX_ORDER} is the order search's ceiling), got {text!r}"
         )
     return values  # type: ignore[return-value]
 

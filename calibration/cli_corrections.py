@@ -25,6 +25,7 @@ check_noise_source`): PASS or FAIL, also in ``reach-cal summary``.
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -32,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .cli_args import number_arg, positive_int
 from .consistency import DEFAULT_ALPHA, check_consistency, exclude_inconsistent
 from .data import CalibrationData
 from .errors import CalibrationError
@@ -60,8 +62,8 @@ def band_arg(text: str) -> tuple[float, float]:
         lo, hi = (float(v) for v in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected LO,HI in MHz, got {text!r}") from None
-    if not 0 <= lo < hi:
-        raise argparse.ArgumentTypeError(f"expected 0 <= LO < HI (MHz), got {text!r}")
+    if not (0 <= lo < hi and math.isfinite(hi)):
+        raise argparse.ArgumentTypeError(f"expected finite 0 <= LO < HI (MHz), got {text!r}")
     return lo, hi
 
 
@@ -95,7 +97,7 @@ def add_correction_options(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--smooth-s11",
-        type=float,
+        type=number_arg(float, 0.0, 1.0, open_low=True),
         metavar="P",
         help="smooth every reflection with a spline of factor P in (0, 1] (1: none)",
     )
@@ -107,7 +109,7 @@ def add_correction_options(parser: argparse.ArgumentParser) -> None:
     )
     consistency.add_argument(
         "--exclude-inconsistent",
-        type=int,
+        type=positive_int,
         nargs="?",
         const=2,
         metavar="N",

@@ -27,6 +27,7 @@ reported as ``file:line: message`` (or ``file: message``), exit status 2.
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -34,16 +35,19 @@ from typing import Any, TypeVar
 import numpy as np
 
 from .cal_kit import IDEAL_KIT, STANDARD_NAMES, CalKit
-from .cli_args import add_command, names_arg, output_arg
+from .cli_args import add_command, names_arg, number_arg, output_arg, positive_float
+from .cli_files import check_outputs, same_file
 from .edges_import import (
     CableLoss,
     EdgesImport,
     EdgesLayout,
     MeasuredLoss,
+    find_file,
     import_edges,
     read_gain_table,
 )
 from .edges_text import UT141C
+from .errors import InvalidDataError
 from .hdf5_io import write_run
 from .touchstone import write_touchstone
 from .vna_import import VnaLayout, correct_exports, read_cal_kit
@@ -64,7 +68,7 @@ def _assignments(convert: Callable[[str], T], what: str) -> Callable[[str], dict
                 if not (sep and key.strip()):
                     raise ValueError
                 out[key.strip()] = convert(value.strip())
-            except ValueError:
+            except (ValueError, argparse.ArgumentTypeError):
                 raise argparse.ArgumentTypeError(
                     f"expected KEY=VALUE,... with {what} values, got {item!r}"
                 ) from None
@@ -96,7 +100,7 @@ def _cable(text: str) -> CableLoss:
     """``ut141c`` or ``KEY=VALUE,...`` changing its fields (argparse type)."""
     if text.strip().lower() == "ut141c":
         return CableLoss(dict(UT141C))
-    changes = _assignments(float, "number")(text)
+    changes = _assignments(number_arg(float, -math.inf), "finite number")(text)
     unknown = sorted(set(changes) - set(UT141C))
     if unknown:
         raise argparse.ArgumentTypeError(
@@ -119,6 +123,10 @@ def _kit(args: argparse.Namespace) -> CalKit:
 
 def cmd_import_edges(args: argparse.Namespace) -> int:
     """Import an EDGES text run (spectra, S11s, temperatures) into a run file (HDF5)."""
+    inputs = [args.directory, args.hot_loss, args.vna, args.kit]
+    check_outputs({"-o": (args.output, "run")}, inputs)
+    if not args.band[0] < args.band[1]:
+        raise InvalidDataError(f"--band needs LO < HI (MHz), got {args.band[0]:g} {args.band[1]:g}")
     layout = EdgesLayout(
         loads=args.loads,
         receiver=args.receiver,
@@ -164,8 +172,22 @@ def cmd_import_edges(args: argparse.Namespace) -> int:
 def cmd_import_vna(args: argparse.Namespace) -> int:
     """Correct raw VNA exports with their standards; write each device's S11 as Touchstone."""
     out_dir = Path(args.output)
+    check_outputs({"-o": (args.output, "directory")}, [args.directory, args.kit])
     kit = _kit(args)
-    corrected = correct_exports(args.directory, args.devices, _vna_layout(args), kit)
+    layout = _vna_layout(args)
+    corrected = correct_exports(args.directory, args.devices, layout, kit)
+    read = [
+        find_file(Path(args.directory), pattern, name)
+        for name in corrected
+        for pattern in (layout.device, *layout.standards_of(name))
+    ]
+    for name in corrected:
+        target = out_dir / f"{name}.s1p"
+        if any(same_file(target, path) for path in read):
+            raise InvalidDataError(
+                f"-o {out_dir}: {target} is an export read to correct it: it would be "
+                "overwritten; nothing written, choose another directory"
+            )
     out_dir.mkdir(exist_ok=True)
     for name, (freq, gamma) in corrected.items():
         note = f"{name}: corrected from {args.directory} with kit {kit.name or 'unnamed'}"
@@ -202,7 +224,7 @@ def _add_edges_options(edges: argparse.ArgumentParser) -> None:
     edges.add_argument("-o", "--output", type=output_arg, required=True, help="run file (HDF5)")
     edges.add_argument(
         "--temperatures",
-        type=_assignments(float, "kelvin"),
+        type=_assignments(positive_float, "kelvin (> 0)"),
         required=True,
         help="physical temperature of every load, K: amb=306.5,hot=393.22,...",
     )
@@ -222,11 +244,13 @@ def _add_edges_options(edges: argparse.ArgumentParser) -> None:
     )
     edges.add_argument("--hot-load", default="hot", help="the load behind the cable")
     edges.add_argument("--cable-load", default="amb", help="the load at the cable's temperature")
-    edges.add_argument("--band", type=float, nargs=2, default=(50.0, 190.0), metavar=("LO", "HI"))
+    edges.add_argument(
+        "--band", type=positive_float, nargs=2, default=(50.0, 190.0), metavar=("LO", "HI")
+    )
     edges.add_argument("--q-variance", choices=("empirical", "radiometer"), default="empirical")
     edges.add_argument(
         "--integration-s",
-        type=float,
+        type=positive_float,
         default=EdgesImport.integration_per_position_s,
         help="accumulation of one Dicke position of one cycle, s",
     )

@@ -15,6 +15,7 @@ import argparse
 from typing import Any
 
 from .cli_args import add_command
+from .cli_files import check_outputs
 
 __all__ = ["add_report_command", "cmd_report"]
 
@@ -26,6 +27,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     residual against its noise, the distance to the noise floor, the reflections, Dicke
     powers, flagged channels, thermocouples, the run's checks and alarms.
     """
+    check_outputs({"-o": (args.output, "directory")}, [args.solution, args.run])
     from .report import write_report
 
     report = write_report(args.solution, args.output, args.run, pdf=args.pdf)

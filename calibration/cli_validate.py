@@ -23,6 +23,7 @@ from typing import Any
 
 from .atomic_file import write_atomically
 from .cli_args import add_command, add_solver_options, output_arg, solver_from_args
+from .cli_files import check_outputs
 from .errors import InvalidDataError
 from .hdf5_io import read_run
 from .validation import HeldOut, LeaveOneOutReport, leave_one_out
@@ -43,6 +44,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     suffix = Path(args.output).suffix.lower() if args.output else ""
     if suffix not in ("", ".json", ".csv"):
         raise InvalidDataError(f"-o {args.output}: write .json or .csv")
+    check_outputs({"-o": (args.output, "text")}, [args.run])
     data, _ = read_run(args.run)
     if args.calibrators:
         data = data.subset(args.calibrators)

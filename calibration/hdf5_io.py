@@ -78,7 +78,13 @@ from .noise_waves import N_PARAMETERS, PARAMETERS
 from .per_frequency import ChannelSolution
 from .polynomial_model import Orders, PolynomialParameters, as_orders
 from .simulate import ReceiverTruth
-from .solution import CalibratedSpectrum, Solution
+from .solution import (
+    MAX_FILE_ORDER,
+    CalibratedSpectrum,
+    Solution,
+    metadata_problems,
+    posterior_problems,
+)
 
 PathLike = str | os.PathLike[str]
 FORMAT_VERSION = "1.0"
@@ -152,6 +158,8 @@ def _open(path: PathLike, file_format: str | tuple[str, ...]) -> Iterator[Any]:
     formats = (file_format,) if isinstance(file_format, str) else file_format
     p = Path(path)
     if not p.is_file():
+        if p.exists():
+            raise FileFormatError(f"{p}: not a regular file")
         raise FileNotFoundError(2, "no such file", str(p))
     try:
         f = h5py.File(p, "r")
@@ -292,16 +300,15 @@ def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> 
     for position, suffix in _POSITIONS:
         arr = _array(obs, f"{name}_{suffix}", path).astype(float)
         key, first = f"integration_s_{position}", obs[f"{name}_spectra"]
-        per_row = float(
-            _attr(meta if key in meta.attrs and key not in first.attrs else first, key, path)
-        )
+        holder = meta if key in meta.attrs and key not in first.attrs else first
+        per_row = _number(holder, key, path)
         if arr.ndim not in (1, 2) or arr.shape[0] == 0:
             raise FileFormatError(f"{path}: {name}_{suffix} has shape {arr.shape}: not 1-D/2-D")
         powers.append(arr.mean(axis=0) if arr.ndim == 2 else arr)
         seconds.append(per_row * (arr.shape[0] if arr.ndim == 2 else 1))
     gamma = _array(obs, f"{name}_s11", path, "iufc").astype(complex)
     temperature = _array(temps, name, path).astype(float) if name in temps else None
-    std_k = float(temps[name].attrs.get("std_k", 0.0)) if name in temps else 0.0
+    std_k = _number(temps[name], "std_k", path, 0.0) if name in temps else 0.0
     q_var = f"{name}_q_variance"
     override = _array(obs, q_var, path).astype(float) if q_var in obs else None
     s11_std = f"{name}_s11_std"
@@ -382,7 +389,7 @@ def read_run_layout(f: Any, path: PathLike) -> RunLayout:
     temps = _group(meta, "temperatures", path)
     freq = _array(obs, "frequencies", path).astype(float)
     gamma_rec = _array(obs, "lna_s11", path, "iufc").astype(complex)
-    width = float(_attr(meta, "channel_width_hz", path))
+    width = _number(meta, "channel_width_hz", path)
     discovered = sorted(k[:-4] for k in obs if k.endswith("_s11") and k != "lna_s11")
     names = _names(meta, "sources") or discovered
     calibrators = _names(meta, "calibrators") or [n for n in names if n in temps]
@@ -396,7 +403,7 @@ def read_run_layout(f: Any, path: PathLike) -> RunLayout:
         raise _in_file(err, path) from err
     rec_std = _array(obs, "lna_s11_std", path).astype(float) if "lna_s11_std" in obs else None
     # channels sharing one reflection error (older files: independent, 1)
-    shared = float(meta.attrs.get("reflection_correlation_channels", 1.0))
+    shared = _number(meta, "reflection_correlation_channels", path, 1.0)
     return RunLayout(
         freq, gamma_rec, width, sources, tuple(calibrators), run_metadata, str(path), rec_std,
         shared,
@@ -415,8 +422,11 @@ def _basis(obj: Any, path: PathLike, prefix: str = "") -> PolynomialBasis:
 
 
 def _orders(value: NDArray[Any], path: PathLike) -> Orders:
-    if value.shape != (N_PARAMETERS,) or value.dtype.kind not in "iu" or np.any(value < 0):
-        raise FileFormatError(f"{path}: orders must be {N_PARAMETERS} integers >= 0: {value}")
+    bad = value.shape != (N_PARAMETERS,) or value.dtype.kind not in "iu"
+    if bad or np.any(value < 0) or np.any(value > MAX_FILE_ORDER):
+        raise FileFormatError(
+            f"{path}: orders must be {N_PARAMETERS} integers 0-{MAX_FILE_ORDER}: {value}"
+        )
     return as_orders(value.tolist())
 
 
@@ -432,6 +442,8 @@ def read_truth(path: PathLike) -> ReceiverTruth | None:
             raise FileFormatError(f"{path}: simulation_truth coefficients do not match orders")
         params = PolynomialParameters(_basis(g, path, "basis_"), orders, coefficients)
         gain, offset = (tuple(float(v) for v in _array(g, k, path)) for k in _TRUTH_TUPLES)
+        if not all(np.all(np.isfinite(v)) for v in (coefficients, gain, offset)):
+            raise FileFormatError(f"{path}: simulation_truth holds NaN or infinite numbers")
         return ReceiverTruth(params, gain, offset)
 
 
@@ -492,18 +504,43 @@ def _read_posterior(g: Any, path: PathLike) -> LinearPosterior:
     n = sum(orders)
     if mean.shape != (n,) or scale.shape != (n, n):
         raise FileFormatError(f"{path}: posterior mean/scale do not match orders {orders}")
-    dof, logz, noise, chi2 = (float(_attr(g, k, path)) for k in _POSTERIOR_FLOATS)
-    posterior = LinearPosterior(
-        orders, mean, scale, dof, logz, noise, chi2, int(_attr(g, "n_rows", path))
-    )
+    dof, logz, noise, chi2 = (_number(g, k, path) for k in _POSTERIOR_FLOATS)
+    n_rows = _number(g, "n_rows", path)
+    if n_rows != int(n_rows):
+        raise FileFormatError(f"{path}: attribute 'n_rows' on '{g.name}' is not an integer")
+    posterior = LinearPosterior(orders, mean, scale, dof, logz, noise, chi2, int(n_rows))
+    problems = posterior_problems(posterior)
+    if problems:
+        raise FileFormatError(f"{path}: posterior '{g.name}': {'; '.join(problems)}")
     if "components" not in g:
         return posterior
-    mix = g["components"]
+    mix = _group(g, "components", path)
     weights = _array(mix, "weights", path).astype(float)
-    components = tuple(_read_posterior(mix[str(i)], path) for i in range(weights.size))
+    good = weights.ndim == 1 and weights.size >= 1 and np.all(np.isfinite(weights))
+    if not (good and np.all(weights >= 0) and abs(weights.sum() - 1.0) < 1e-6):
+        raise FileFormatError(f"{path}: '{mix.name}/weights' are not >= 0 summing to 1")
+    components = tuple(
+        _read_posterior(_group(mix, str(i), path), path) for i in range(weights.size)
+    )
     if any(any(a > b for a, b in zip(c.orders, orders, strict=True)) for c in components):
         raise FileFormatError(f"{path}: a mixture component exceeds the envelope {orders}")
     return MixturePosterior(**vars(posterior), components=components, weights=weights)
+
+
+def _number(obj: Any, name: str, path: PathLike, default: float | None = None) -> float:
+    """A numeric attribute (a non-number is a format error, not a traceback).
+
+    ``default`` is its value when absent; without one, an absent attribute is an error.
+    """
+    if default is not None and name not in obj.attrs:
+        return default
+    value = _attr(obj, name, path)
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise FileFormatError(
+            f"{path}: attribute '{name}' on '{obj.name}' is not a number: {value!r}"
+        ) from None
 
 
 def read_solution(path: PathLike) -> Solution | ChannelSolution:
@@ -527,6 +564,8 @@ def read_solution_group(f: Any, path: PathLike) -> Solution | ChannelSolution:
     ev_logz = _array(ev, "log_evidence", path).astype(float)
     if ev_orders.shape != (ev_logz.size, N_PARAMETERS):
         raise FileFormatError(f"{path}: evidence orders {ev_orders.shape} vs log_evidence")
+    if np.any(np.isnan(ev_logz) | (ev_logz == np.inf)):  # -inf: a model the data left free
+        raise FileFormatError(f"{path}: evidence log_evidence holds NaN or +inf")
     table = {_orders(o, path): float(z) for o, z in zip(ev_orders, ev_logz, strict=True)}
     model = _as_str(_attr(f, "measurement_model", path))
     if model not in ("radiometer", "homoscedastic"):
@@ -539,7 +578,7 @@ def read_solution_group(f: Any, path: PathLike) -> Solution | ChannelSolution:
         "radiometer" if model == "radiometer" else "homoscedastic",
         table,
         tuple(calibrators or ()),
-        _metadata(f, path),
+        _solution_metadata(f, path),
     )
 
 
@@ -555,12 +594,29 @@ def _read_channel_solution(f: Any, path: PathLike) -> ChannelSolution:
     if method not in ("least_squares", "bayesian"):
         raise FileFormatError(f"{path}: unknown per-channel method {method!r}")
     try:
-        return ChannelSolution(
+        solution = ChannelSolution(
             freq, mean, cov, log_z, method, tuple(_names(f, "calibrators") or ()),
-            _metadata(f, path),
+            _solution_metadata(f, path),
         )
     except ValueError as err:
         raise FileFormatError(f"{path}: bad per-channel solution: {err}") from err
+    variances = np.diagonal(solution.covariance, axis1=1, axis2=2)
+    bad = not np.all(np.isfinite(solution.mean)) or np.any(np.isnan(solution.covariance))
+    if bad or np.any(variances < 0) or not np.all(np.isfinite(solution.freq_hz)):
+        raise FileFormatError(
+            f"{path}: per-channel solution with NaN or infinite means or frequencies, or "
+            "negative variances"
+        )
+    return solution
+
+
+def _solution_metadata(f: Any, path: PathLike) -> dict[str, Any]:
+    """A solution's metadata, with the entries the commands read checked."""
+    metadata = _metadata(f, path)
+    problems = metadata_problems(metadata)
+    if problems:
+        raise FileFormatError(f"{path}: metadata: {'; '.join(problems)}")
+    return metadata
 
 
 def write_calibrated(

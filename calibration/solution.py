@@ -16,6 +16,7 @@ The predictive distribution of ``T_src`` (eq. 3.41) has two independent parts:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cache, partial
@@ -323,3 +324,123 @@ class Solution:
             "calibrators": list(self.calibrators),
             "models_evaluated": len(self.evidence_table),
         }
+
+
+# ------------------------------------------------------------------ checks of a solution read
+#: The most polynomial terms a solution file may give one parameter: four times the order
+#: search's ceiling (16); more is a corrupt file, not a model.
+MAX_FILE_ORDER = 64
+
+
+def posterior_problems(post: LinearPosterior) -> list[str]:
+    """What makes a posterior read from a file unusable (empty when it is sound).
+
+    ``dof`` may be ``inf`` (a Gaussian posterior); every other number must be finite, the
+    noise variance and ``dof`` positive, and ``scale`` symmetric with a non-negative
+    diagonal: otherwise every calibrated spectrum is NaN, or its error bars meaningless.
+    """
+    problems = []
+    if not np.all(np.isfinite(post.mean)):
+        problems.append("mean is not finite")
+    scale = post.scale
+    if not np.all(np.isfinite(scale)):
+        problems.append("scale is not finite")
+    elif np.any(np.diag(scale) < 0) or not np.allclose(scale, scale.T, rtol=1e-8, atol=0):
+        problems.append("scale is not a covariance (asymmetric, or a negative variance)")
+    if np.isnan(post.dof) or post.dof <= 0:
+        problems.append(f"dof {post.dof} is not > 0")
+    if not (np.isfinite(post.noise_variance) and post.noise_variance > 0):
+        problems.append(f"noise_variance {post.noise_variance} is not a finite number > 0")
+    if not (np.isfinite(post.log_evidence) and np.isfinite(post.chi2) and post.chi2 >= 0):
+        problems.append("log_evidence or chi2 is not finite (or chi2 < 0)")
+    if post.n_rows < 1:
+        problems.append(f"n_rows {post.n_rows} is not >= 1")
+    return problems
+
+
+def _is_orders(value: object) -> bool:
+    return (
+        isinstance(value, list) and len(value) == len(PARAMETERS)
+        and all(type(v) is int and 0 <= v <= MAX_FILE_ORDER for v in value)
+    )
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_weights(value: object) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(w, dict) and _is_orders(w.get("orders")) and _is_number(w.get("weight"))
+        for w in value
+    )
+
+
+def _is_cuts(value: object) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(c, dict) and isinstance(c.get("why"), str)
+        and _is_orders(c.get("asked")) and _is_orders(c.get("kept"))
+        for c in value
+    )
+
+
+#: The metadata entries the commands read, and what each must be when present.
+_METADATA_RULES: dict[str, tuple[Callable[[object], bool], str]] = {
+    "best_orders": (_is_orders, f"{len(PARAMETERS)} integers 0-{MAX_FILE_ORDER}"),
+    "order_limits": (_is_orders, f"{len(PARAMETERS)} integers 0-{MAX_FILE_ORDER}"),
+    "model_weights": (_is_weights, "a list of {orders, weight}"),
+    "averaged": (lambda v: isinstance(v, bool), "true or false"),
+    "orders_at_ceiling": (
+        lambda v: isinstance(v, list) and all(isinstance(n, str) for n in v), "a list of names"
+    ),
+    "prior_dominated": (
+        lambda v: isinstance(v, dict) and all(_is_number(r) for r in v.values()),
+        "a mapping of parameters to numbers",
+    ),
+    "order_box_cuts": (_is_cuts, "a list of {why, asked, kept}"),
+    "reflection_errors_uncorrected": (_is_number, "a number"),
+    "channel_width_hz": (lambda v: _is_number(v) and float(v) > 0, "a width > 0"),  # type: ignore[arg-type]
+    "grid_origin_hz": (_is_number, "a frequency"),
+}
+
+
+def metadata_problems(metadata: Mapping[str, Any]) -> list[str]:
+    """What is wrong with the metadata entries a solution's readers use (empty: none)."""
+    return [
+        f"{key} must be {what}, not {metadata[key]!r}"[:200]
+        for key, (good, what) in _METADATA_RULES.items()
+        if metadata.get(key) is not None and not good(metadata[key])
+    ]
+
+
+def grid_metadata(freq_hz: FloatArray, channel_width_hz: float) -> dict[str, float]:
+    """The channel grid a solution was solved on, for its metadata (:func:`check_grid`)."""
+    return {"channel_width_hz": float(channel_width_hz), "grid_origin_hz": float(freq_hz[0])}
+
+
+def check_grid(
+    metadata: Mapping[str, Any], freq_hz: FloatArray, channel_width_hz: float, run: str
+) -> None:
+    """Refuse to calibrate a run on another channel grid than the solution's.
+
+    The noise waves and the noise scale are fitted to spectra of one channel width (the
+    spectrometer's channelisation smooths the reflections' ripple and sets the radiometer
+    noise): a run of wider or shifted channels is another receiver setting, and calibrated
+    with this solution would be silently wrong. Solutions without a recorded grid (made
+    before it was recorded, or by the receiver's own calibrate step) are not checked.
+    """
+    width, origin = metadata.get("channel_width_hz"), metadata.get("grid_origin_hz")
+    if width is None or origin is None:
+        return
+    width, origin = float(width), float(origin)
+    if not np.isclose(channel_width_hz, width, rtol=1e-6, atol=0):
+        raise InvalidDataError(
+            f"{run} has channels {channel_width_hz:g} Hz wide; the solution was solved on "
+            f"{width:g} Hz channels: solve this run's grid, or calibrate a run of that grid"
+        )
+    steps = (np.asarray(freq_hz, dtype=float) - origin) / width
+    if np.max(np.abs(steps - np.round(steps)), initial=0.0) > 1e-3:
+        raise InvalidDataError(
+            f"{run}'s channels are offset from the solution's channel grid "
+            f"({origin:.6g} Hz + k x {width:g} Hz): another spectrometer setting"
+        )
