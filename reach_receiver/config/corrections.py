@@ -19,16 +19,30 @@ at the termination) or a data-sheet coax (``length_m``, ``velocity_factor``,
 loss_exponent``, default 0.5: :class:`calibration.coax.DataSheetCoax`); ``thermocouple``
 is the TC-08 port on the cable, the termination's being the source's own (the site's
 ``thermocouples``). Relative file names are taken from the site file's directory.
+
+Every Touchstone file the site names (these two-ports, the ``references``) is checked when
+the site is read (:func:`touchstone_problem`): a file that exists must be a regular file
+of at most :data:`MAX_TOUCHSTONE_BYTES` that parses with the expected number of ports, so
+that a device, a FIFO, a huge or a foreign file is named at its site-file line instead of
+failing (or filling memory) in the middle of a run. A file not there yet is not refused:
+a site is often checked before its files are installed.
 """
 
 from __future__ import annotations
 
+import os
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from calibration.touchstone import read_touchstone_network
+
 from .fields import REQUIRED, Fields
+
+#: The largest Touchstone file a site may name: a network of ~10^5 frequencies.
+MAX_TOUCHSTONE_BYTES = 8 * 1024 * 1024
 
 CALIBRATION_KEYS = ("band_hz", "solver", "mts", "cables", "rfi")
 _MTS_KEYS = ("sources", "lna")
@@ -60,16 +74,55 @@ class CorrectionSettings:
 
     def path(self, name: str, site_source: str) -> Path:
         """A file named in the site, relative to the site file's directory."""
-        given = Path(name)
-        base = Path(site_source).parent if site_source not in ("", "<memory>") else Path()
-        return given if given.is_absolute() else base / given
+        return site_path(name, site_source)
+
+
+def site_path(name: str, site_source: str) -> Path:
+    """A file named in a site file: relative names are taken from the site's directory."""
+    given = Path(name)
+    base = Path(site_source).parent if site_source not in ("", "<memory>") else Path()
+    return given if given.is_absolute() else base / given
+
+
+def touchstone_problem(path: Path, ports: int) -> str | None:
+    """What is wrong with a Touchstone file a site names (module doc), ``None`` if nothing."""
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as err:
+        return f"{path}: {err.strerror or err}"
+    if not stat.S_ISREG(info.st_mode):
+        return f"{path} is not a regular file"
+    if info.st_size > MAX_TOUCHSTONE_BYTES:
+        return f"{path} is {info.st_size} bytes: a Touchstone file has at most " + str(
+            MAX_TOUCHSTONE_BYTES
+        )
+    try:
+        network = read_touchstone_network(path)
+    except (OSError, ValueError) as err:  # TouchstoneError is a ValueError
+        return str(getattr(err, "strerror", None) or err)
+    if network.n_ports != ports:
+        return f"{path}: a {network.n_ports}-port file, where a {ports}-port one is needed"
+    return None
+
+
+def _checked_file(f: Fields, name: str, ports: int) -> str | None:
+    """A Touchstone file named at key ``name`` of ``f``, checked (problems go to ``f``)."""
+    value = f.text(name, None)
+    if value is not None:
+        problem = touchstone_problem(site_path(value, f.file), ports)
+        if problem is not None:
+            f.report(name, problem)
+            return None
+    return value
 
 
 def read_corrections(f: Fields) -> CorrectionSettings:
     """The corrections of a site's ``calibration`` section (problems go to ``f``)."""
     mts = f.mapping("mts", _MTS_KEYS)
-    sources = mts.text("sources", None) if mts is not None else None
-    lna = mts.text("lna", None) if mts is not None else None
+    sources = _checked_file(mts, "sources", 2) if mts is not None else None
+    lna = _checked_file(mts, "lna", 2) if mts is not None else None
     cables: dict[str, CableSettings] = {}
     listed = f.raw("cables", None)
     if listed is not None and not isinstance(listed, Mapping):
@@ -93,7 +146,7 @@ def _cable(f: Fields) -> CableSettings | None:
     port = f.count("thermocouple", REQUIRED)
     if f.has("thermocouple") and not 1 <= port <= 8:
         f.report("thermocouple", f"must be a TC-08 port 1-8, not {port}")
-    s2p = f.text("s2p", None)
+    s2p = _checked_file(f, "s2p", 2)
     coax = [k for k in _COAX_KEYS if f.has(k)]
     if s2p is not None and coax:
         f.report("s2p", f"give a measured two-port or a data-sheet cable, not both ({coax})")

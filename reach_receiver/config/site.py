@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +49,14 @@ from reach_receiver.frontend.layout import (
     SourcePosition,
 )
 
-from .corrections import CALIBRATION_KEYS, CorrectionSettings, corrections_yaml, read_corrections
+from .corrections import (
+    CALIBRATION_KEYS,
+    CorrectionSettings,
+    corrections_yaml,
+    read_corrections,
+    site_path,
+    touchstone_problem,
+)
 from .daemon import DAEMON_KEYS, DaemonSettings, daemon_yaml, read_daemon
 from .fields import REQUIRED, Fields, closest, type_name
 from .monitoring import MONITORING_KEYS, MonitoringSettings, monitoring_yaml, read_monitoring
@@ -77,6 +85,10 @@ SECTIONS = (
 _PLACE_KEYS = ("name", "longitude_deg", "latitude_deg")
 _REFERENCE_KEYS = ("test_load",)
 _SIMULATION_KEYS = ("compression", "start", "monotonic_origin")
+#: Simulated seconds per real second a shared clock may run at (reach-sim's default: 3000).
+MAX_COMPRESSION = 1e6
+#: The largest site file read: a site is a page of YAML.
+MAX_SITE_BYTES = 1024 * 1024
 
 
 class SiteError(ProblemsError):
@@ -207,13 +219,8 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         "solver", METHODS, DEFAULT_SOLVER
     )
     corrections = read_corrections(reader.section("calibration", CALIBRATION_KEYS))
-    references = reader.section("references", _REFERENCE_KEYS)
-    written_references = {k: references.text(k) for k in _REFERENCE_KEYS if references.has(k)}
-    simulation = reader.section("simulation", _SIMULATION_KEYS)
-    clock = {k: simulation.number(k, REQUIRED) for k in _SIMULATION_KEYS if simulation.has(k)}
-    if clock and set(clock) != set(_SIMULATION_KEYS):
-        missing = sorted(set(_SIMULATION_KEYS) - set(clock))
-        simulation.report("<clock>", f"needs all of {', '.join(_SIMULATION_KEYS)}: {missing}")
+    written_references = _references(reader.section("references", _REFERENCE_KEYS))
+    clock = _clock(reader.section("simulation", _SIMULATION_KEYS))
     sources = _sources(reader)
     thermocouples = _thermocouples(reader)
     daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), source, reader.problems)
@@ -236,6 +243,38 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         corrections=corrections,
         solver=solver,
     )
+
+
+def _references(references: Fields) -> dict[str, str | None]:
+    """The reference files (taken from the site's directory), each a one-port Touchstone."""
+    written: dict[str, str | None] = {}
+    for key in (k for k in _REFERENCE_KEYS if references.has(k)):
+        value = references.text(key)
+        if value is None:
+            continue
+        path = site_path(value, references.file)
+        problem = touchstone_problem(path, ports=1)
+        if problem is not None:
+            references.report(key, problem)
+        written[key] = str(path)
+    return written
+
+
+def _clock(simulation: Fields) -> dict[str, float]:
+    """A ``reach-sim``'s shared clock: all three numbers, or none (the wall clock)."""
+    clock = {}
+    if simulation.has("compression"):
+        clock["compression"] = simulation.number(
+            "compression", REQUIRED, low=0.0, high=MAX_COMPRESSION, open_low=True
+        )
+    if simulation.has("start"):
+        clock["start"] = simulation.number("start", REQUIRED, low=0.0)
+    if simulation.has("monotonic_origin"):
+        clock["monotonic_origin"] = simulation.number("monotonic_origin", REQUIRED, low=0.0)
+    if clock and set(clock) != set(_SIMULATION_KEYS):
+        missing = sorted(set(_SIMULATION_KEYS) - set(clock))
+        simulation.report("<clock>", f"needs all of {', '.join(_SIMULATION_KEYS)}: {missing}")
+    return clock
 
 
 def _devices(reader: _Reader) -> DeviceSettings | None:
@@ -369,7 +408,7 @@ def load_site(path: str | Path) -> SiteConfig:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = _read_bounded(path)
     except (OSError, UnicodeDecodeError) as err:
         message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
         raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
@@ -377,6 +416,22 @@ def load_site(path: str | Path) -> SiteConfig:
     if problems:
         raise SiteError(problems)
     return parse_site(document, str(path))
+
+
+def _read_bounded(path: Path) -> str:
+    """The text of a regular file of at most :data:`MAX_SITE_BYTES` (else ``OSError``).
+
+    A device (``/dev/zero``), a FIFO or a huge file named as the site would fill memory
+    or block forever: they are refused before reading.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    with os.fdopen(fd, "rb") as handle:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise OSError(f"{path} is not a regular file")
+        data = handle.read(MAX_SITE_BYTES + 1)
+    if len(data) > MAX_SITE_BYTES:
+        raise OSError(f"larger than {MAX_SITE_BYTES} bytes: not a site file")
+    return data.decode("utf-8")
 
 
 def find_site(given: Path | None, environ: Mapping[str, str] = os.environ) -> Path:
