@@ -151,7 +151,7 @@ def _cable(f: Fields) -> CableSettings | None:
     if s2p is not None and coax:
         f.report("s2p", f"give a measured two-port or a data-sheet cable, not both ({coax})")
     length = velocity = loss = None
-    if s2p is None:
+    if not f.has("s2p"):  # a data-sheet cable (a bad s2p is already reported)
         length = f.number("length_m", REQUIRED, low=0.0, open_low=True)
         velocity = f.number("velocity_factor", REQUIRED, low=0.0, high=1.0, open_low=True)
         loss = f.number("loss_db_per_m", REQUIRED, low=0.0)
