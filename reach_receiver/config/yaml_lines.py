@@ -9,6 +9,13 @@ or of each item). Duplicate keys, which YAML forbids but PyYAML silently resolve
 last, are reported naming both lines. Syntax errors become a :class:`Problem` at the
 line the parser gives.
 
+Loading is bounded, whatever the text: a document longer than
+:data:`MAX_DOCUMENT_CHARS` is refused before parsing, containers nested deeper than
+:data:`MAX_DEPTH` are refused at their line while composing (before any recursion gets
+near Python's limit), and aliases that would expand past :data:`MAX_EXPANDED_NODES`
+values ("billion laughs") or contain themselves are refused after loading (the loaded
+document shares the aliased objects, so it is small in memory either way).
+
 One extension to YAML 1.1's resolvers: a number written with an exponent but no dot
 (``40e6``, YAML 1.2 style) is a float rather than a string, since sweep frequencies are
 naturally written that way. YAML 1.1's ``on``/``off``/``yes``/``no`` stay booleans.
@@ -22,13 +29,21 @@ from dataclasses import dataclass
 from typing import Any
 
 import yaml
-from yaml.nodes import MappingNode, Node, SequenceNode
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from reach_receiver.errors import ConfigError
 
 MERGE_TAG = "tag:yaml.org,2002:merge"
 #: A schedule is small; aliases must not blow it up ("billion laughs").
 MAX_EXPANDED_NODES = 100_000
+#: Containers inside containers: a schedule needs a handful; the composer and every
+#: walk over the document recurse, and 64 levels keep them far from Python's limit.
+MAX_DEPTH = 64
+#: The longest document parsed (characters): the pure-Python parser takes about 8 us a
+#: character, so 1 Mi characters is already seconds; callers may ask for less.
+MAX_DOCUMENT_CHARS = 1024 * 1024
+#: The longest integer read: Python refuses to convert more than 4300 digits anyway.
+MAX_INT_DIGITS = 100
 
 
 @dataclass(frozen=True)
@@ -105,12 +120,26 @@ class LineLoader(yaml.SafeLoader):
         # (id(sequence node), index) -> line where the item is written; an alias item's
         # node is the anchored one, whose own mark points at the anchor, not the item.
         self.item_lines: dict[tuple[int, int], int] = {}
+        self.depth = 0
 
     def compose_node(self, parent: Node | None, index: Any) -> Node | None:
-        """Compose one node, first noting where a sequence item is written."""
+        """Compose one node, first noting where a sequence item is written.
+
+        Nesting deeper than :data:`MAX_DEPTH` stops the load at the line where it
+        happens.
+        """
+        event = self.peek_event()
         if isinstance(parent, SequenceNode) and isinstance(index, int):
-            self.item_lines[(id(parent), index)] = int(self.peek_event().start_mark.line) + 1
-        return super().compose_node(parent, index)
+            self.item_lines[(id(parent), index)] = int(event.start_mark.line) + 1
+        if self.depth >= MAX_DEPTH:
+            raise yaml.composer.ComposerError(
+                None, None, f"nested deeper than {MAX_DEPTH} levels", event.start_mark
+            )
+        self.depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
 
     def construct_line_mapping(self, node: MappingNode) -> LineDict:
         """Build a mapping, recording key lines and duplicate keys (merge keys honoured)."""
@@ -141,6 +170,16 @@ class LineLoader(yaml.SafeLoader):
             result.lines[key] = line
         return result
 
+    def construct_bounded_int(self, node: ScalarNode) -> int:
+        """An integer, refused at its line when longer than :data:`MAX_INT_DIGITS`."""
+        text = str(node.value)
+        if len(text) > MAX_INT_DIGITS:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"an integer of {len(text)} characters (at most {MAX_INT_DIGITS})",
+                node.start_mark,
+            )
+        return int(self.construct_yaml_int(node))
+
     def construct_line_sequence(self, node: SequenceNode) -> LineList:
         """Build a sequence, recording the line of each item."""
         items = [self.construct_object(child, deep=True) for child in node.value]
@@ -153,6 +192,7 @@ class LineLoader(yaml.SafeLoader):
 
 LineLoader.add_constructor("tag:yaml.org,2002:map", LineLoader.construct_line_mapping)
 LineLoader.add_constructor("tag:yaml.org,2002:seq", LineLoader.construct_line_sequence)
+LineLoader.add_constructor("tag:yaml.org,2002:int", LineLoader.construct_bounded_int)
 LineLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
@@ -160,7 +200,9 @@ LineLoader.add_implicit_resolver(
 )
 
 
-def load_yaml(text: str, file: str) -> tuple[Any, list[Problem]]:
+def load_yaml(
+    text: str, file: str, max_chars: int = MAX_DOCUMENT_CHARS
+) -> tuple[Any, list[Problem]]:
     """Safe-load one YAML document with line numbers.
 
     Parameters
@@ -169,13 +211,19 @@ def load_yaml(text: str, file: str) -> tuple[Any, list[Problem]]:
         The document.
     file
         Its name, for the problems.
+    max_chars
+        The longest document parsed; a longer one is a problem, not parsed.
 
     Returns
     -------
     tuple
         The document (``None`` when it could not be read) and the problems found:
-        syntax errors, duplicate keys, recursive aliases.
+        syntax errors, duplicate keys, recursive aliases, a document too long, too deep
+        or too large once its aliases are expanded.
     """
+    if len(text) > max_chars:
+        message = f"the document has {len(text):,} characters; at most {max_chars:,} are read"
+        return None, [Problem(file, 1, "<yaml>", message)]
     try:
         loader = LineLoader(text)
     except yaml.reader.ReaderError as err:  # a character YAML does not allow
@@ -191,7 +239,7 @@ def load_yaml(text: str, file: str) -> tuple[Any, list[Problem]]:
         message = " ".join(str(part) for part in (err.context, err.problem) if part)
         return None, [Problem(file, line, "<yaml>", f"YAML syntax: {message}")]
     except (yaml.YAMLError, ValueError, OverflowError, RecursionError) as err:
-        # ValueError: e.g. a date 2024-13-45; RecursionError: absurdly deep nesting
+        # ValueError: e.g. a date 2024-13-45; RecursionError: a last guard (MAX_DEPTH)
         return None, [Problem(file, 1, "<yaml>", f"YAML: {err}")]
     finally:
         loader.dispose()

@@ -13,40 +13,43 @@ The document (top level)::
       - use: cycle
 
 Included paths are relative to the including file; the including file's ``vars`` and
-``blocks`` override the included ones; cycles and missing files are problems. Values
-may use ``${name}`` and ``${site.<key>}`` (:mod:`.variables`); steps are read by
+``blocks`` override the included ones; cycles and missing files are problems
+(:mod:`.sources`, which reads regular files only, with a bound). Values may use
+``${name}`` and ``${site.<key>}`` (:mod:`.variables`); steps are read by
 :mod:`.parsing`, each by its kind (:mod:`.kinds`). After the steps are read, the whole
 list is checked for interlock violations (:mod:`.interlocks`) and impossible timing
 (:mod:`.timing`), with the site's front-end and spectrometer when a site is given.
 Every problem of every file is collected; when there is any, a :class:`ScheduleError`
 lists them all, one ``file:line: key: message`` per line, and no schedule is returned.
+
+Checking is bounded in time and memory whatever the files hold (:mod:`.limits`): a
+schedule past a bound (nesting, steps, expansion, sizes, numbers, duration) is refused
+with a problem where the bound was passed, and checking stops there.
 """
 
 from __future__ import annotations
 
-import os
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from reach_receiver.config.fields import UNRESOLVED, closest, type_name
+from reach_receiver.config.fields import UNRESOLVED, type_name
 from reach_receiver.config.site import SiteConfig
-from reach_receiver.config.yaml_lines import LineDict, LineList, Problem, ProblemsError, load_yaml
+from reach_receiver.config.yaml_lines import LineDict, Problem, ProblemsError
 
 from . import steps as s
 from .interlocks import interlock_problems
 from .kinds import KindRegistry
-from .parsing import Block, ParseContext, compile_steps
+from .limits import MAX_RUN_STEPS, Budget, LimitExceeded
+from .parsing import ParseContext, compile_steps
+from .sources import Reader, Sources, read_file
 from .timing import timing_problems
-from .variables import Defined, Variables, valid_name
+from .variables import Variables
 
-__all__ = ["Problem", "ScheduleError", "compile_schedule", "compile_text"]
+__all__ = ["Problem", "Reader", "ScheduleError", "compile_schedule", "compile_text", "read_file"]
 
 FORMAT_VERSION = 1
-TOP_KEYS = ("version", "schedule", "include", "vars", "blocks", "steps")
-INCLUDED_KEYS = ("include", "vars", "blocks")
 
 
 class ScheduleError(ProblemsError):
@@ -54,116 +57,6 @@ class ScheduleError(ProblemsError):
 
     ``str(error)`` gives one ``file:line: key: message`` per line.
     """
-
-
-def read_file(path: Path) -> str:
-    """A schedule file's text (UTF-8)."""
-    return path.read_text(encoding="utf-8")
-
-
-#: How included files are read: from disk, or from texts a client sent with its schedule.
-Reader = Callable[[Path], str]
-
-
-@dataclass
-class _Sources:
-    """Files read so far, and the definitions they made."""
-
-    problems: list[Problem]
-    read: Reader = read_file
-    texts: dict[str, str] = field(default_factory=dict)
-    variables: dict[str, Defined] = field(default_factory=dict)
-    blocks: dict[str, Block] = field(default_factory=dict)
-
-    def add(self, file: str, text: str, stack: tuple[str, ...]) -> LineDict | None:
-        """Load one file's text; read its includes, then its vars and blocks."""
-        self.texts.setdefault(file, text)
-        document, problems = load_yaml(text, file)
-        self.problems += problems
-        if problems and document is None:
-            return None
-        if not isinstance(document, LineDict):
-            what = "a schedule" if not stack else "an included file"
-            message = f"{what} is a mapping of {', '.join(TOP_KEYS)}, not {type_name(document)}"
-            self.problems.append(Problem(file, 1, "<document>", message))
-            return None
-        allowed = TOP_KEYS if not stack else INCLUDED_KEYS
-        for key in document:
-            if key not in allowed:
-                known = ", ".join(allowed)
-                message = f"unknown key '{key}'{closest(key, allowed)} (known: {known})"
-                if stack and key in TOP_KEYS:
-                    message = f"an included file holds only {', '.join(INCLUDED_KEYS)}"
-                self.problems.append(Problem(file, document.line_of(key), str(key), message))
-        self._includes(document, file, (*stack, _identity(file)))
-        self._definitions(document, file)
-        return document
-
-    def _includes(self, document: LineDict, file: str, stack: tuple[str, ...]) -> None:
-        written = document.get("include")
-        if written is None:
-            return
-        if isinstance(written, str):
-            written = LineList([written], line=document.line_of("include"))
-        if not isinstance(written, LineList):
-            message = f"must be a list of file names, not {type_name(written)}"
-            self.problems.append(Problem(file, document.line_of("include"), "include", message))
-            return
-        for index, name in enumerate(written):
-            line, key = written.line_of(index), f"include[{index}]"
-            if not isinstance(name, str) or not name:
-                message = f"must be a file name, not {type_name(name)}"
-                self.problems.append(Problem(file, line, key, message))
-                continue
-            path = _relative(file, name)
-            if _identity(str(path)) in stack:
-                looped = stack[stack.index(_identity(str(path))) :]
-                chain = " -> ".join(Path(f).name for f in (*looped, str(path)))
-                self.problems.append(Problem(file, line, key, f"include cycle: {chain}"))
-                continue
-            try:
-                text = self.read(path)
-            except (OSError, UnicodeDecodeError, ValueError) as err:
-                message = f"cannot read {path}: {getattr(err, 'strerror', None) or err}"
-                self.problems.append(Problem(file, line, key, message))
-                continue
-            self.add(str(path), text, stack)
-
-    def _definitions(self, document: LineDict, file: str) -> None:
-        for section in ("vars", "blocks"):
-            written = document.get(section)
-            if written is None:
-                continue
-            if not isinstance(written, LineDict):
-                message = f"must be a mapping of names, not {type_name(written)}"
-                self.problems.append(Problem(file, document.line_of(section), section, message))
-                continue
-            for name, value in written.items():
-                line = written.line_of(name)
-                if not valid_name(name):
-                    message = f"{name!r} is not a valid name (letters, digits, _; not 'site')"
-                    self.problems.append(Problem(file, line, f"{section}.{name}", message))
-                elif section == "vars":
-                    self.variables[name] = Defined(value, file, line)
-                else:
-                    self.blocks[name] = Block(value, file, line)
-
-
-def _relative(file: str, name: str) -> Path:
-    written = Path(name)
-    if written.is_absolute() or file.startswith("<"):
-        return written
-    return Path(os.path.normpath(Path(file).parent / written))
-
-
-def _identity(file: str) -> str:
-    """The same string for every spelling of one file's path."""
-    if file.startswith("<"):
-        return file
-    try:
-        return str(Path(file).resolve())
-    except (OSError, ValueError, RuntimeError):
-        return file
 
 
 def _plain(value: Any) -> Any:
@@ -243,13 +136,41 @@ def compile_text(
         With every problem found, when there is any.
     """
     problems: list[Problem] = []
-    sources = _Sources(problems, read)
+    sources = Sources(problems, read)
+    try:
+        steps, variables, name = _checked(
+            text, file, sources, kinds, site, start_utc or datetime.now(timezone.utc)
+        )
+    except LimitExceeded as limit:
+        problems.append(limit.problem)
+    if problems:
+        raise ScheduleError(_order(problems, list(sources.texts)))
+    return s.Schedule(
+        name=name,
+        steps=tuple(steps),
+        files=tuple(sources.texts.items()),
+        variables=tuple((k, _plain(v)) for k, v in variables.items()),
+        kinds=kinds,
+    )
+
+
+def _checked(
+    text: str,
+    file: str,
+    sources: Sources,
+    kinds: KindRegistry,
+    site: SiteConfig | None,
+    start_utc: datetime,
+) -> tuple[list[s.Step], dict[str, object], str]:
+    """Read, compile and check; problems go to ``sources.problems``, a bound raises."""
+    problems = sources.problems
     document = sources.add(file, text, ())
     if document is None:
-        raise ScheduleError(_order(problems, list(sources.texts)))
-    variables = Variables(sources.variables, site, problems)
+        return [], {}, ""
+    budget = Budget()
+    variables = Variables(sources.variables, site, problems, budget)
     name = _header(document, file, variables, problems)
-    context = ParseContext(kinds, variables, problems, site, sources.blocks)
+    context = ParseContext(kinds, variables, problems, site, sources.blocks, budget=budget)
     steps: list[s.Step] = []
     if "steps" in document:
         steps = compile_steps(document["steps"], file, document.line_of("steps"), "steps", context)
@@ -257,23 +178,46 @@ def compile_text(
         context.using = [block_name]
         compile_steps(block.steps, block.file, block.line, f"blocks.{block_name}", context)
     values = variables.values()
-    problems += interlock_problems(steps, kinds, site.sources if site is not None else None)
+    _count_run_steps(steps, kinds)
+    problems += interlock_problems(
+        steps, kinds, site.sources if site is not None else None, budget=budget
+    )
     problems += timing_problems(
         steps,
         kinds,
-        start_utc=start_utc or datetime.now(timezone.utc),
+        start_utc=start_utc,
         longitude_deg=site.longitude_deg if site is not None else 0.0,
         spectrum_period_s=site.devices.spectrometer.period_s if site is not None else 0.0,
+        budget=budget,
     )
-    if problems:
-        raise ScheduleError(_order(problems, list(sources.texts)))
-    return s.Schedule(
-        name=name,
-        steps=tuple(steps),
-        files=tuple(sources.texts.items()),
-        variables=tuple((k, _plain(v)) for k, v in values.items()),
-        kinds=kinds,
-    )
+    return steps, values, name
+
+
+def _count_run_steps(steps: Sequence[s.Step], kinds: KindRegistry) -> None:
+    """Refuse a schedule that would run more than :data:`~.limits.MAX_RUN_STEPS` steps.
+
+    A step with children runs them ``count`` times when it has a ``count`` (a repeat);
+    each body is visited once, with its multiplier.
+    """
+    total = 0
+
+    def visit(items: Sequence[s.Step], times: int) -> None:
+        nonlocal total
+        for step in items:
+            total += times
+            if total > MAX_RUN_STEPS:
+                message = (
+                    f"the schedule would run more than {MAX_RUN_STEPS:,} steps"
+                    " (counts multiplied by the counts of repeats around them)"
+                )
+                key = kinds.of(step).name if kinds.knows(step) else "<step>"
+                raise LimitExceeded(Problem(step.where.file, step.where.line, key, message))
+            children = kinds.of(step).children(step) if kinds.knows(step) else ()
+            if children:
+                count = getattr(step, "count", 1)
+                visit(children, times * (count if isinstance(count, int) else 1))
+
+    visit(steps, 1)
 
 
 def compile_schedule(
@@ -292,7 +236,7 @@ def compile_schedule(
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_file(path)
     except (OSError, UnicodeDecodeError) as err:
         message = f"cannot read the schedule: {getattr(err, 'strerror', None) or err}"
         raise ScheduleError([Problem(str(path), 1, "<file>", message)]) from err

@@ -36,6 +36,7 @@ from reach_receiver.frontend.paths import FrontEnd, SignalPath
 
 from . import steps as s
 from .kinds import KindRegistry
+from .limits import Budget
 
 SWITCHES = (*SWITCH_POSITIONS, "mts")
 _SAFE_OFF = (NOISE_SOURCE, "6v", "12v")  # PROTOCOL.md, "safe state"
@@ -75,6 +76,7 @@ class BoardCheck:
     switches: dict[str, int | str | None] = field(default_factory=lambda: dict.fromkeys(SWITCHES))
     problems: list[Problem] = field(default_factory=list)
     current: s.Step | None = None
+    budget: Budget = field(default_factory=Budget)
 
     def report(self, key: str, message: str) -> None:
         """Record a violation at the line of the step being checked."""
@@ -94,6 +96,7 @@ class BoardCheck:
         """Check one step against what is known, then apply its effect."""
         outer, self.current = self.current, step
         try:
+            self.budget.visit(step.where.file, step.where.line, self._key(step))
             if not self.kinds.knows(step):  # could not be read: assume nothing after it
                 self.forget()
                 return
@@ -103,6 +106,9 @@ class BoardCheck:
             kind.check_interlocks(step, self)
         finally:
             self.current = outer
+
+    def _key(self, step: s.Step) -> str:
+        return self.kinds.of(step).name if self.kinds.knows(step) else "<step>"
 
     def forget(self) -> None:
         """Nothing is known any more (after a step that could not be read)."""
@@ -146,12 +152,14 @@ def interlock_problems(
     steps: Sequence[s.Step],
     kinds: KindRegistry,
     sources: Mapping[str, SourcePosition] | None = None,
+    budget: Budget | None = None,
 ) -> list[Problem]:
     """Every interlock violation found by walking ``steps`` from an unknown board state.
 
-    ``sources`` is the site's source table (table A.2 by default).
+    ``sources`` is the site's source table (table A.2 by default); ``budget`` counts
+    the steps visited (a repeat's body is walked twice) against their bound.
     """
     planner = FrontEnd(_NoBoard(), sources) if sources is not None else FrontEnd(_NoBoard())
-    board = BoardCheck(kinds, planner)
+    board = BoardCheck(kinds, planner, budget=budget if budget is not None else Budget())
     board.walk(steps)
     return board.problems

@@ -7,6 +7,12 @@ inlines a named block (blocks may use blocks; a cycle is a problem). The kind's 
 :class:`~reach_receiver.config.fields.Fields` and always returns a step (with harmless
 fallbacks where an argument was wrong), so that the later whole-schedule checks still
 run; nothing is returned to the caller when any problem was found.
+
+Every value a kind reads goes through :meth:`ParseContext.checked`, which refuses
+numbers no kind could take (not finite, or past the bounds of their key's unit:
+:func:`~.limits.number_problem`) before the kind compares or converts them. Step lists
+nest at most :data:`~.limits.MAX_NESTING` deep (a ``repeat``'s body, a block's use),
+and every step compiled counts against :data:`~.limits.MAX_STEPS`.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from reach_receiver.config.yaml_lines import LineDict, LineList, Problem
 from reach_receiver.frontend.layout import REACH_SOURCES, VNA_STANDARDS
 
 from .kinds import KindRegistry
+from .limits import MAX_NESTING, Budget, LimitExceeded, number_problem
 from .steps import Step, Unparsed, Where
 from .variables import Variables
 
@@ -44,6 +51,8 @@ class ParseContext:
     site: SiteConfig | None = None
     blocks: dict[str, Block] = field(default_factory=dict)
     using: list[str] = field(default_factory=list)
+    budget: Budget = field(default_factory=Budget)
+    depth: int = 0
 
     @property
     def sources(self) -> tuple[str, ...]:
@@ -89,8 +98,17 @@ class ParseContext:
             key=key,
             allowed=allowed,
             problems=self.problems,
-            resolve=self.variables.resolve,
+            resolve=self.checked,
         )
+
+    def checked(self, value: Any, file: str, line: int, key: str) -> Any:
+        """``value`` with its variables substituted, refused when no kind could take it."""
+        resolved = self.variables.resolve(value, file, line, key)
+        problem = number_problem(key, resolved)
+        if problem is None:
+            return resolved
+        self.problems.append(Problem(file, line, key, problem))
+        return UNRESOLVED
 
 
 def compile_steps(items: Any, file: str, line: int, key: str, ctx: ParseContext) -> list[Step]:
@@ -104,9 +122,16 @@ def compile_steps(items: Any, file: str, line: int, key: str, ctx: ParseContext)
             Problem(file, line, key, f"must be a non-empty list of steps, not {type_name(items)}")
         )
         return []
+    if ctx.depth >= MAX_NESTING:
+        message = f"steps nested more than {MAX_NESTING} deep (repeats, blocks using blocks)"
+        raise LimitExceeded(Problem(file, line, key, message))
     out: list[Step] = []
-    for index, item in enumerate(items):
-        out += compile_step(item, file, items.line_of(index), ctx)
+    ctx.depth += 1
+    try:
+        for index, item in enumerate(items):
+            out += compile_step(item, file, items.line_of(index), ctx)
+    finally:
+        ctx.depth -= 1
     return out
 
 
@@ -114,6 +139,8 @@ def compile_step(item: Any, file: str, line: int, ctx: ParseContext) -> list[Ste
     """Compile one step (a ``use`` gives the block's steps) written at ``file:line``."""
     if isinstance(item, str):
         item = LineDict({item: None}, line=line, lines={item: line})
+    written = str(next(iter(item))) if isinstance(item, dict) and item else "<step>"
+    ctx.budget.step(file, line, written)
     if not isinstance(item, LineDict) or len(item) != 1:
         message = f"a step is one 'kind: arguments' mapping, not {type_name(item)}"
         if isinstance(item, dict) and item:

@@ -14,11 +14,16 @@ integration         ``seconds + 2 P`` per position: one spectrum discarded after
 Only the first repetition of a ``repeat`` is listed (indented) in the timeline; its
 duration stands for every repetition. The same walk finds impossible timing, which kinds
 report through :meth:`TimingWalk.report` (a repeat whose period is shorter than one
-repetition, a ``wait until_utc`` earlier than the schedule gets there).
+repetition, a ``wait until_utc`` earlier than the schedule gets there). While a
+schedule is checked, the walk also refuses a schedule lasting more than
+:data:`~.limits.MAX_DURATION_S` (at the step that passes it) and counts the steps it
+visits (:class:`~.limits.Budget`), so that huge durations and repeats nested in repeats
+stop the check instead of overflowing a date or running for hours.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
@@ -28,6 +33,7 @@ from reach_receiver.devices.vna_settings import SweepSettings
 
 from . import steps as s
 from .kinds import KindRegistry
+from .limits import MAX_DURATION_S, Budget, LimitExceeded, duration_text
 
 SWEEP_OVERHEAD_FACTOR = 1.2
 SWEEP_OVERHEAD_S = 2.0
@@ -71,6 +77,8 @@ class TimingWalk:
         Seconds from the schedule's start at which the current step starts.
     sweep
         The VNA settings in force (a ``vna_calibrate`` step changes them).
+    budget
+        While checking: counts the steps visited, and bounds the duration.
     """
 
     def __init__(
@@ -79,6 +87,7 @@ class TimingWalk:
         start_utc: datetime,
         longitude_deg: float,
         spectrum_period_s: float,
+        budget: Budget | None = None,
     ) -> None:
         self.kinds = kinds
         self.start = as_utc(start_utc)
@@ -88,6 +97,7 @@ class TimingWalk:
         self.t = 0.0
         self.entries: list[TimelineEntry] = []
         self.problems: list[Problem] = []
+        self.budget = budget
         self._depth = 0
 
     @property
@@ -124,6 +134,9 @@ class TimingWalk:
             self._depth -= 1
 
     def _step(self, step: s.Step) -> float:
+        key = self.kinds.of(step).name if self.kinds.knows(step) else "<step>"
+        if self.budget is not None:
+            self.budget.visit(step.where.file, step.where.line, key)
         index = len(self.entries)
         self.entries.append(TimelineEntry(self.t, 0.0, "", step.where, self._depth))
         if self.kinds.knows(step):
@@ -131,6 +144,13 @@ class TimingWalk:
         else:  # a step that could not be read (reported already)
             duration, text = 0.0, type(step).__name__.lower()
         self.entries[index] = TimelineEntry(self.t, duration, text, step.where, self._depth)
+        end = self.t + duration
+        if self.budget is not None and not (math.isfinite(end) and end <= MAX_DURATION_S):
+            message = (
+                f"the schedule would last more than {duration_text(MAX_DURATION_S)}"
+                f" by the end of this step ({duration_text(end)} estimated)"
+            )
+            raise LimitExceeded(Problem(step.where.file, step.where.line, key, message))
         return duration
 
 
@@ -140,8 +160,9 @@ def _walk(
     start_utc: datetime,
     longitude_deg: float,
     spectrum_period_s: float,
+    budget: Budget | None = None,
 ) -> tuple[TimingWalk, float]:
-    walk = TimingWalk(kinds, start_utc, longitude_deg, spectrum_period_s)
+    walk = TimingWalk(kinds, start_utc, longitude_deg, spectrum_period_s, budget)
     return walk, walk.walk(steps)
 
 
@@ -200,9 +221,15 @@ def timing_problems(
     start_utc: datetime,
     longitude_deg: float,
     spectrum_period_s: float,
+    budget: Budget | None = None,
 ) -> list[Problem]:
-    """Impossible timing: repeat periods shorter than a repetition, waits already past."""
-    return _walk(steps, kinds, start_utc, longitude_deg, spectrum_period_s)[0].problems
+    """Impossible timing: repeat periods shorter than a repetition, waits already past.
+
+    With a ``budget``, a schedule too long or too costly to walk raises
+    :class:`~.limits.LimitExceeded` at the step where its bound is passed.
+    """
+    walk = _walk(steps, kinds, start_utc, longitude_deg, spectrum_period_s, budget)[0]
+    return walk.problems
 
 
 def format_timeline(entries: Sequence[TimelineEntry]) -> str:

@@ -8,6 +8,14 @@ or an unknown name is a problem at the line where it is used.
 
 A container substituted for ``${name}`` is copied with every line set to the line of
 the use, so that a mistake inside it is reported where the schedule used it.
+
+Substitution is bounded (:mod:`.limits`), since variables that use a variable twice
+double at each level: a variable's value holds at most
+:data:`~.limits.MAX_VALUE_NODES` values nested at most
+:data:`~.limits.MAX_VALUE_DEPTH` deep, an interpolated text at most
+:data:`~.limits.MAX_TEXT_CHARS` characters, a variable is defined through at most
+:data:`~.limits.MAX_NESTING` others, and every value copied counts against
+:data:`~.limits.MAX_COPIED_NODES` (:class:`~.limits.Budget`).
 """
 
 from __future__ import annotations
@@ -20,6 +28,15 @@ from typing import Any
 from reach_receiver.config.fields import UNRESOLVED
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.config.yaml_lines import LineDict, LineList, Problem
+
+from .limits import (
+    MAX_NESTING,
+    MAX_TEXT_CHARS,
+    MAX_VALUE_DEPTH,
+    MAX_VALUE_NODES,
+    Budget,
+    LimitExceeded,
+)
 
 _REFERENCE = re.compile(r"\$\{([^}]*)\}")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -56,6 +73,28 @@ def relined(value: Any, line: int) -> Any:
     return value
 
 
+def extent(value: Any) -> tuple[int, int]:
+    """How many values ``value`` holds, and how deep its containers nest.
+
+    A container shared by aliases counts at each place it appears, as a copy holds it.
+    """
+    sizes: dict[int, tuple[int, int]] = {}
+
+    def measure(item: Any) -> tuple[int, int]:
+        if not isinstance(item, dict | list):
+            return 1, 0
+        if id(item) not in sizes:
+            inside = item.values() if isinstance(item, dict) else item
+            children = [measure(child) for child in inside]
+            sizes[id(item)] = (
+                1 + sum(size for size, _ in children),
+                1 + max((depth for _, depth in children), default=0),
+            )
+        return sizes[id(item)]
+
+    return measure(value)
+
+
 class Variables:
     """Resolves ``${...}`` references against the schedule's variables and the site.
 
@@ -68,15 +107,23 @@ class Variables:
         The site configuration, or ``None`` when no site file is given.
     problems
         Where unknown names and cycles are reported.
+    budget
+        Counts the values copied (a budget of its own by default).
     """
 
     def __init__(
-        self, defined: dict[str, Defined], site: SiteConfig | None, problems: list[Problem]
+        self,
+        defined: dict[str, Defined],
+        site: SiteConfig | None,
+        problems: list[Problem],
+        budget: Budget | None = None,
     ) -> None:
         self._defined = defined
         self._site = site
         self._problems = problems
+        self._budget = budget if budget is not None else Budget()
         self._values: dict[str, Any] = {}
+        self._sizes: dict[str, int] = {}
         self._resolving: list[str] = []
 
     def values(self) -> dict[str, Any]:
@@ -98,13 +145,31 @@ class Variables:
         if name not in self._defined:
             self._problems.append(Problem(file, line, key, self._unknown(name)))
             return UNRESOLVED
+        if len(self._resolving) >= MAX_NESTING:
+            chain = " -> ".join([*self._resolving[:3], "...", name])
+            message = f"variables defined through more than {MAX_NESTING} others ({chain})"
+            raise LimitExceeded(Problem(file, line, key, message))
         definition = self._defined[name]
         self._resolving.append(name)
         try:
             value = self.resolve(definition.value, definition.file, definition.line, f"vars.{name}")
         finally:
             self._resolving.pop()
+        size, depth = extent(value)
+        message = None
+        if depth > MAX_VALUE_DEPTH:
+            message = f"nests more than {MAX_VALUE_DEPTH} deep once its variables are substituted"
+        elif size > MAX_VALUE_NODES:
+            message = (
+                f"holds {size:,} values once its variables are substituted;"
+                f" at most {MAX_VALUE_NODES:,}"
+            )
+        if message is not None:
+            where = Problem(definition.file, definition.line, f"vars.{name}", message)
+            self._problems.append(where)
+            value = UNRESOLVED
         self._values[name] = value
+        self._sizes[name] = size
         return value
 
     def resolve(self, value: Any, file: str, line: int, key: str) -> Any:
@@ -112,11 +177,13 @@ class Variables:
         if isinstance(value, str):
             return self._resolve_text(value, file, line, key)
         if isinstance(value, LineDict):
+            self._budget.copy(1, file, line, key)
             out = LineDict(line=value.line, lines=value.lines)
             for k, v in value.items():
                 out[k] = self.resolve(v, file, value.line_of(k), f"{key}.{k}")
             return UNRESOLVED if any(v is UNRESOLVED for v in out.values()) else out
         if isinstance(value, LineList):
+            self._budget.copy(1, file, line, key)
             items = [
                 self.resolve(v, file, value.line_of(i), f"{key}[{i}]") for i, v in enumerate(value)
             ]
@@ -128,25 +195,34 @@ class Variables:
     def _resolve_text(self, text: str, file: str, line: int, key: str) -> Any:
         whole = _REFERENCE.fullmatch(text)
         if whole:
-            return relined(self.lookup(whole.group(1).strip(), file, line, key), line)
-        failed = False
-
-        def interpolate(match: re.Match[str]) -> str:
-            nonlocal failed
+            name = whole.group(1).strip()
+            value = self.lookup(name, file, line, key)
+            if isinstance(value, dict | list):
+                self._budget.copy(self._sizes.get(name, 1), file, line, key)
+            return relined(value, line)
+        pieces: list[str] = []
+        length, start, failed = 0, 0, False
+        for match in _REFERENCE.finditer(text):
             value = self.lookup(match.group(1).strip(), file, line, key)
             if value is UNRESOLVED:
                 failed = True
-                return ""
-            if isinstance(value, dict | list):
+            elif isinstance(value, dict | list):
                 self._problems.append(
                     Problem(file, line, key, f"${{{match.group(1)}}} is not text: use it alone")
                 )
                 failed = True
-                return ""
-            return str(value)
-
-        result = _REFERENCE.sub(interpolate, text)
-        return UNRESOLVED if failed else result
+            piece = "" if failed else str(value)
+            pieces += [text[start : match.start()], piece]
+            start = match.end()
+            length += len(pieces[-2]) + len(piece)
+            if length > MAX_TEXT_CHARS:
+                message = f"expands to more than {MAX_TEXT_CHARS:,} characters"
+                self._problems.append(Problem(file, line, key, message))
+                return UNRESOLVED
+        if failed:
+            return UNRESOLVED
+        pieces.append(text[start:])
+        return "".join(pieces)
 
     def _site_value(self, field: str, file: str, line: int, key: str) -> Any:
         if field not in SITE_KEYS:
