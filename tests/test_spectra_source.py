@@ -107,7 +107,7 @@ def test_a_flood_from_elsewhere_ends_at_the_deadline_and_flush_is_bounded(sender
 def test_the_transport_names_its_source_and_refuses_a_host_name():
     assert UdpReceiver("127.0.0.1", 0, source="10.0.0.5", source_port=7).sender == "10.0.0.5:7"
     assert UdpReceiver("127.0.0.1", 0).sender == "anyone"
-    with pytest.raises(ValueError, match="itpm.local"):
+    with pytest.raises(ValueError, match=r"itpm\.local"):
         UdpReceiver("127.0.0.1", 0, source="itpm.local")
 
 

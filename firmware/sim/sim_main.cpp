@@ -3,7 +3,8 @@
 //   teensy-sim [--uart1 PATH] [--watchdog-ms N]
 //
 // stdout: "PTY <slave path>" once, then "PINS <state payload>" at start and after every
-//         line that changed an output (and after a watchdog reset or a dead-man trip).
+//         line that changed an output (and after a watchdog reset or a dead-man trip);
+//         "TXDROP <n>" when a reply was dropped because nobody read the terminal.
 // The dead-man switch runs on the host's monotonic clock, checked at least every 20 ms.
 // stdin:  "I2C <addr> <celsius>|fail|absent" sets a simulated MCP9808;
 //         "HANG" stops the main loop, so the simulated watchdog resets the core after
@@ -18,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <termios.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <string>
@@ -41,21 +43,79 @@ bool make_raw(int fd, bool set_speed) {
   return tcsetattr(fd, TCSANOW, &tio) == 0;
 }
 
-// Write all or drop: with no client on the terminal, replies are lost, as on a real
-// USB port nobody listens to.
-void write_drop(int fd, const char* data, size_t n) {
-  while (n > 0) {
-    ssize_t w = write(fd, data, n);
-    if (w > 0) {
-      data += w;
-      n -= static_cast<size_t>(w);
-    } else if (w < 0 && errno == EINTR) {
-      continue;
-    } else {
-      return;
+// Replies leave through a transmit queue of whole lines. When it has no room the
+// firmware waits up to 70 ms for the client to take bytes, then drops the reply, and
+// after such a timeout drops at once until bytes leave again, as the board's USB serial
+// does (Teensyduino's usb_serial.c, TX_TIMEOUT_MSEC), so a client that stopped reading
+// cannot stall the loop. The queue's 64 KiB stand for the buffering a USB serial port
+// has in the host's kernel, which a pseudo-terminal lacks (it refuses writes after some
+// 20 kB of short replies). A client that reads keeps every reply (the firmware waits and
+// reads no request meanwhile, so the writer waits too); one that leaves queue and
+// terminal full for 70 ms loses whole replies, never part of one, each reported on
+// stdout as "TXDROP <replies dropped so far>" (PROTOCOL.md, "Flow control").
+constexpr int64_t kTxTimeoutMs = 70;
+constexpr size_t kTxQueueBytes = 64 * 1024;
+
+int64_t monotonic_ms() {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1000 + ts.tv_nsec / 1000000;
+}
+
+class Transmit {
+ public:
+  explicit Transmit(int fd) : fd_(fd) {}
+
+  bool pending() const { return !queue_.empty(); }
+
+  // A reset loses what the USB buffers held.
+  void discard() {
+    queue_.clear();
+    timed_out_ = false;
+  }
+
+  // Move queued bytes to the terminal as far as it takes them (a line may be split
+  // between writes: its rest stays queued, it is never dropped).
+  void flush() {
+    while (!queue_.empty()) {
+      ssize_t w = write(fd_, queue_.data(), queue_.size());
+      if (w > 0) {
+        queue_.erase(0, static_cast<size_t>(w));
+        timed_out_ = false;
+      } else if (!(w < 0 && errno == EINTR)) {
+        return;  // full (EAGAIN), or no terminal: wait for POLLOUT
+      }
     }
   }
-}
+
+  // Queue one reply, waiting up to kTxTimeoutMs for room; false when it was dropped.
+  bool send(const char* data, size_t n) {
+    flush();
+    const int64_t deadline = monotonic_ms() + kTxTimeoutMs;
+    while (queue_.size() + n > kTxQueueBytes) {
+      const int64_t left = deadline - monotonic_ms();
+      if (timed_out_ || left <= 0) {
+        timed_out_ = true;
+        ++dropped_;
+        printf("TXDROP %llu\n", static_cast<unsigned long long>(dropped_));
+        fflush(stdout);
+        return false;
+      }
+      struct pollfd out = {fd_, POLLOUT, 0};
+      poll(&out, 1, static_cast<int>(left));
+      flush();
+    }
+    queue_.append(data, n);
+    flush();
+    return true;
+  }
+
+ private:
+  int fd_;
+  std::string queue_;
+  bool timed_out_ = false;  // the last reply was dropped and nothing left since
+  uint64_t dropped_ = 0;
+};
 
 void print_pins(reach::Firmware& fw) {
   reach::Payload payload;
@@ -143,13 +203,14 @@ int main(int argc, char** argv) {
   // A reply leaves only after the pin changes it caused have been reported on stdout, so
   // whoever has read the reply can trust the simulator's view of the switches.
   uint64_t pins_reported = 0;
+  Transmit transmit(master);
   reach::Firmware* reporting = nullptr;
   hal.host_sink = [&](const char* data, size_t n) {
     if (reporting != nullptr && hal.write_count() != pins_reported) {
       print_pins(*reporting);
       pins_reported = hal.write_count();
     }
-    write_drop(master, data, n);
+    transmit.send(data, n);
   };
   reach::Firmware fw(hal);
   reporting = &fw;
@@ -165,8 +226,10 @@ int main(int argc, char** argv) {
   std::string stdin_buf;
   char buf[512];
   while (!g_stop) {
+    // Queued replies leave as the terminal takes them (POLLOUT).
+    const short master_events = static_cast<short>(transmit.pending() ? POLLIN | POLLOUT : POLLIN);
     struct pollfd fds[3] = {{STDIN_FILENO, POLLIN, 0},
-                            {hung ? -1 : master, POLLIN, 0},
+                            {hung ? -1 : master, master_events, 0},
                             {uart1_alive && !hung ? uart1 : -1, POLLIN, 0}};
     int ready = poll(fds, 3, 20);
     if (ready < 0 && errno != EINTR) break;
@@ -201,7 +264,7 @@ int main(int argc, char** argv) {
             pins_reported = hal.write_count();
           }
         }
-      } else if (fds[1].revents & (POLLHUP | POLLERR)) {
+      } else if (fds[1].revents & (POLLHUP | POLLERR) && !(fds[1].revents & POLLOUT)) {
         poll(nullptr, 0, 10);  // no slave open at all: wait instead of spinning
       }
       if (fds[2].revents & POLLIN) {
@@ -210,6 +273,7 @@ int main(int argc, char** argv) {
       } else if (fds[2].revents & (POLLHUP | POLLERR)) {
         uart1_alive = false;
       }
+      if (fds[1].revents & POLLOUT) transmit.flush();
       fw.poll();  // the dead-man switch, as the board's loop() does
       if (hal.write_count() != pins_reported) {
         print_pins(fw);
@@ -224,6 +288,7 @@ int main(int argc, char** argv) {
       // The WDOG fires: what the host sent meanwhile is lost, the board starts afresh.
       while (read(master, buf, sizeof buf) > 0) {
       }
+      transmit.discard();
       hal.set_boot_reason(reach::BootReason::Watchdog);
       fw.begin();
       hal.watchdog_kick();

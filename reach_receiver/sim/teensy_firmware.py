@@ -11,6 +11,9 @@ The program's side channel (PROTOCOL.md, "Host build as simulator"):
 * standard output: ``PTY <path>`` once, then ``PINS <state payload>`` at start and after
   every change of an output, e.g.
   ``PINS ms1=3 ms2=0 ... 12v=1 ... boot=por uptime_ms=52 changes=2 deadman=0``;
+* standard output also: ``TXDROP <n>`` when a reply was dropped because nobody read the
+  terminal for 70 ms (the board's USB transmit timeout; counted in
+  :attr:`FirmwareTeensy.replies_dropped` and logged as a warning);
 * standard input: ``I2C <addr> <celsius>`` / ``I2C <addr> fail`` / ``I2C <addr> absent``
   set what a simulated MCP9808 reads, ``HANG`` stops the firmware's main loop so that its
   simulated watchdog resets it (power-on state, ``boot=wdog``);
@@ -168,6 +171,8 @@ class FirmwareTeensy:
         self._state: dict[str, str] = {}
         self._callbacks: list[StateCallback] = []
         self._stdin_lock = threading.Lock()
+        self.replies_dropped = 0
+        """Replies the program dropped since start: its terminal stayed full for 70 ms."""
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
@@ -186,6 +191,7 @@ class FirmwareTeensy:
         with self._changed:
             self._state = {}
         self._pending, self._eof = b"", False
+        self.replies_dropped = 0
         binary = (
             ensure_built(self.firmware_dir) if self.build else simulator_binary(self.firmware_dir)
         )
@@ -383,6 +389,14 @@ class FirmwareTeensy:
     def _line(self, line: str) -> None:
         if line.startswith("PTY "):
             self._port = line[4:].strip()
+        elif line.startswith("TXDROP "):
+            count = line[7:].strip()
+            self.replies_dropped = int(count) if count.isdigit() else self.replies_dropped + 1
+            if self.replies_dropped == 1 or self.replies_dropped % 1000 == 0:  # not one a reply
+                logger.warning(
+                    "%s: reply dropped: nobody read the terminal for 70 ms (%d so far)",
+                    DEVICE, self.replies_dropped,
+                )
         elif line.startswith("PINS "):
             self._publish(parse_pins(line[5:]))
             self._started.set()  # started: terminal open and first state known
