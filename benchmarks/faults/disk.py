@@ -183,11 +183,11 @@ def _run_limited(argv: list[str], fsize_kb: int) -> Answer:
 def _judge_run(name: str, found: dict[str, Any]) -> Trial:
     if "error" in found:
         return Trial(name, "crash", found["error"][:200])
-    # What the user reads: reach-run's own last line (the simulator may log after it).
+    # What the user reads: reach-run's own lines (the simulator may log after them).
     said = [line for line in found["stderr"].splitlines() if line.startswith("reach-run:")]
     answer = Answer(found["code"], found["stdout"], found["stderr"])
     if said and not answer.traceback:
-        answer = Answer(found["code"], found["stdout"], said[-1])
+        answer = Answer(found["code"], found["stdout"], " | ".join(said))
     intact = not found["missing"]
     if answer.code == 0 and not answer.traceback:  # there was room enough
         return Trial(name, "clean" if intact else "lost", found["missing"] or "completed")

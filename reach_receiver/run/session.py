@@ -12,7 +12,10 @@ between steps and every wait or integration checks it while it runs.
 However a run ends (completed, a device fault, a failed check, a stop, an unexpected
 error) the front-end is put in its safe state, the temperature log is stored, the run
 file is merged with its status and reason, and the instruments are closed. A run that
-did not complete raises :class:`RunFailed` naming the step and its line.
+did not complete raises :class:`RunFailed` naming the step and its line. On a full disk
+the store refuses the measurement by name (:class:`~reach_receiver.store.DiskFull`)
+while it still has room for the records that close the run; a merged run file that
+does not fit leaves the part files as they are, and the reason says where they are.
 
 A completed run that made a calibration then gets its report, figures and summary, in
 ``<run dir>/report/`` (:mod:`.report`; ``report=False`` skips it), so that ``reach-run``
