@@ -25,10 +25,11 @@ DISK, MODE, KB = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 if MODE == "fsize":
     resource.setrlimit(resource.RLIMIT_FSIZE, (KB * 1024, resource.RLIM_INFINITY))
 
-def full():
-    """No room at all from here on."""
+def full(*pids):
+    """No room at all from here on (for these child processes too)."""
     if MODE == "fsize":
-        resource.setrlimit(resource.RLIMIT_FSIZE, (1, resource.RLIM_INFINITY))
+        for pid in (0, *pids):
+            resource.prlimit(pid, resource.RLIMIT_FSIZE, (1, resource.RLIM_INFINITY))
         return
     with open(DISK / "filler", "wb", buffering=0) as out:
         for block in (65536, 512):
@@ -38,10 +39,11 @@ def full():
             except OSError:
                 pass
 
-def room():
+def room(*pids):
     """Space returns."""
     if MODE == "fsize":
-        resource.setrlimit(resource.RLIMIT_FSIZE, (resource.RLIM_INFINITY,) * 2)
+        for pid in (0, *pids):
+            resource.prlimit(pid, resource.RLIMIT_FSIZE, (resource.RLIM_INFINITY,) * 2)
     else:
         (DISK / "filler").unlink(missing_ok=True)
         subprocess.run(["mount", "-o", "remount,size=64m", str(DISK)], check=True)
@@ -180,6 +182,39 @@ def test_the_metrics_database_drops_a_batch_on_a_full_disk_and_resumes(tmp_path)
     assert found["again"] == 2000
     assert found["cleared"] is None
     assert found["rows"] >= 4000
+
+
+def test_reachd_stays_up_on_a_full_state_directory_and_names_it(tmp_path):
+    found = on_small_disk(tmp_path, 8192, '''
+        import signal, time
+        from benchmarks.faults.disk import SCHEDULE, _start_reachd, _submit_and_wait
+        from benchmarks.faults.disk import _wait_for_queue_file
+        from reach_receiver.daemon.client import DaemonClient
+        root = DISK.parent
+        (root / "state").symlink_to(DISK)  # the state directory (and its runs) on the disk
+        schedule = root / "diskfill.yaml"
+        schedule.write_text(SCHEDULE)
+        log = root / "reachd.log"
+        daemon = _start_reachd(root, log)
+        full(daemon.pid)
+        with DaemonClient(root / "run" / "control.sock") as client:
+            job = _submit_and_wait(client, schedule)
+            status = client.request("status")
+            room(daemon.pid)
+            _wait_for_queue_file(DISK / "queue.json", int(job["id"]))
+        daemon.send_signal(signal.SIGTERM)
+        code = daemon.wait(timeout=60)
+        print(json.dumps({"job": job, "state": status["state"], "code": code,
+                          "log": log.read_text(), "mode": MODE}))
+    ''')
+    assert found["job"]["state"] == "failed"
+    assert "the run did not start" in found["job"]["reason"]
+    assert any(words in found["job"]["reason"] for words in NAMED), found["job"]["reason"]
+    assert found["state"] == "faulted"  # up, answering, the queue held for an operator
+    assert found["code"] == 0
+    assert "Traceback" not in found["log"]
+    if found["mode"] == "tmpfs":  # (under a file-size limit its log file is limited too)
+        assert "not written, its previous state kept" in found["log"]  # the queue file
 
 
 def test_reach_run_under_a_file_size_limit_names_it_and_keeps_every_part(tmp_path):
