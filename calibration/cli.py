@@ -129,7 +129,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if unknown:
         known = ", ".join(REACH_CALIBRATORS)
         raise InvalidDataError(f"unknown calibrators {unknown}; REACH has: {known}")
-    check_outputs({"-o": (args.output, "run")}, [])
+    check_outputs({"-o": (args.output, "run")}, [], remakes="simulation")
     lo, hi = args.band
     if not 0 < lo < hi:
         raise InvalidDataError(f"--band needs 0 < LO < HI (MHz), got {lo:g} {hi:g}")

@@ -6,9 +6,10 @@ Every command that writes a file checks its outputs before any work (:func:`chec
   a symbolic or hard link): ``reach-cal solve RUN -o RUN`` would replace the
   measurements by their solution;
 * an existing output must be something the command may replace: for an HDF5 output, an
-  empty file or a file of the same kind (a solution replaces a solution), never a run
-  file holding measurements; only a *simulated* run (``simulation_truth``, reproducible
-  from its seed) may be replaced by another run; a text output (CSV, JSON) never
+  empty file or a file of the same kind (a solution replaces a solution), never a file
+  holding measurements, unless the command itself makes them again from what it reads:
+  ``simulate`` replaces a simulated run (``simulation_truth``, remade from its seed),
+  ``import edges DIR`` a run imported from ``DIR``; a text output (CSV, JSON) never
   replaces an HDF5 file; a directory output must not be an existing file;
 * two outputs of one command may not be the same file.
 
@@ -55,12 +56,14 @@ def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
 def check_outputs(
     outputs: Mapping[str, tuple[str | None, OutputKind]],
     inputs: Sequence[str | os.PathLike[str] | None],
+    remakes: str | None = None,
 ) -> None:
     """Refuse outputs that would overwrite an input or measurements (module doc).
 
     ``outputs`` maps each option (``-o``, ``--csv``) to its path (``None``: not given)
     and the kind written there; ``inputs`` are the files and directories the command
-    reads.
+    reads. ``remakes`` is the run this command makes again: ``"simulation"``, or the
+    directory it imports.
     """
     given = [(opt, path, kind) for opt, (path, kind) in outputs.items() if path is not None]
     for i, (opt, path, kind) in enumerate(given):
@@ -73,10 +76,10 @@ def check_outputs(
         for other_opt, other, _ in given[i + 1:]:
             if same_file(path, other):
                 raise InvalidDataError(f"{opt} and {other_opt} name the same file {path}")
-        _check_existing(opt, Path(path), kind)
+        _check_existing(opt, Path(path), kind, remakes)
 
 
-def _check_existing(opt: str, path: Path, kind: OutputKind) -> None:
+def _check_existing(opt: str, path: Path, kind: OutputKind, remakes: str | None) -> None:
     """Refuse to replace ``path`` when it exists and is not something ``kind`` may replace."""
     try:
         info = path.stat()
@@ -102,8 +105,11 @@ def _check_existing(opt: str, path: Path, kind: OutputKind) -> None:
             f"{opt} {path} exists and is not an HDF5 file: it would be replaced; "
             "remove it first or choose another output"
         )
-    measured, simulated = _holds_measurements(path, found)
-    if measured and not (kind == "run" and simulated):
+    measured, origin = _holds_measurements(path, found)
+    remade = origin is not None and remakes is not None and (
+        origin == remakes or (origin != "simulation" and same_file(origin, remakes))
+    )
+    if measured and not (kind == "run" and remade):
         raise InvalidDataError(
             f"{opt} {path} holds measurements (a {found or 'run'} file): reach-cal never "
             "writes over a run; choose another output"
@@ -130,17 +136,23 @@ def _hdf5_format(path: Path) -> str | None:
         return ""  # an HDF5 signature but unreadable: treat as data, never replace
 
 
-def _holds_measurements(path: Path, found: str) -> tuple[bool, bool]:
-    """Whether an HDF5 file holds measurements, and whether they are simulated."""
-    if found in (*RUN_FORMATS, PART_FORMAT):
-        measured = True
-    elif found == "":
-        measured = True  # no format: REACH's own run layout, or unreadable
-    else:
-        return False, False
+def _holds_measurements(path: Path, found: str) -> tuple[bool, str | None]:
+    """Whether an HDF5 file holds measurements, and where they came from when remade.
+
+    The origin is ``"simulation"`` for a simulated run, the directory of an imported one,
+    ``None`` for measurements nothing can make again (a receiver's run, its parts).
+    """
+    if found not in (*RUN_FORMATS, PART_FORMAT, ""):  # "": no format (REACH's own layout)
+        return False, None
+    if found != FORMATS["run"]:
+        return True, None
     try:
         with h5py.File(path, "r") as f:
-            simulated = found == FORMATS["run"] and "simulation_truth" in f
+            if "simulation_truth" in f:
+                return True, "simulation"
+            imported = f.attrs.get("imported_from")
     except OSError:
-        simulated = False
-    return measured, simulated
+        return True, None
+    if imported is None:
+        return True, None
+    return True, imported.decode() if isinstance(imported, bytes) else str(imported)

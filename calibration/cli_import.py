@@ -124,7 +124,7 @@ def _kit(args: argparse.Namespace) -> CalKit:
 def cmd_import_edges(args: argparse.Namespace) -> int:
     """Import an EDGES text run (spectra, S11s, temperatures) into a run file (HDF5)."""
     inputs = [args.directory, args.hot_loss, args.vna, args.kit]
-    check_outputs({"-o": (args.output, "run")}, inputs)
+    check_outputs({"-o": (args.output, "run")}, inputs, remakes=str(args.directory))
     if not args.band[0] < args.band[1]:
         raise InvalidDataError(f"--band needs LO < HI (MHz), got {args.band[0]:g} {args.band[1]:g}")
     layout = EdgesLayout(

@@ -16,6 +16,8 @@ import pytest
 
 from calibration.cli import main
 from calibration.cli_args import number_arg
+from calibration.cli_files import check_outputs
+from calibration.errors import InvalidDataError
 from calibration.hdf5_io import read_solution
 
 CALIBRATORS = "cold,hot,r25,r100,c10open,c10short"
@@ -248,3 +250,17 @@ def test_number_arg_takes_finite_numbers_in_range_only():
                         (positive, "x"), (small, "11"), (small, "2.5"), (small, "0")]:
         with pytest.raises(argparse.ArgumentTypeError, match=repr(text)):
             parse(text)
+
+
+def test_a_run_is_replaced_only_by_the_command_that_makes_it_again(work, capsys):
+    (work / "lab").mkdir()
+    imported = measured(work, "imported.h5")
+    with h5py.File(imported, "r+") as f:
+        f.attrs["imported_from"] = str(work / "lab")
+    assert check_outputs({"-o": ("imported.h5", "run")}, [], remakes="lab") is None
+    for remakes in ("simulation", "elsewhere", None):
+        with pytest.raises(InvalidDataError, match="holds measurements"):
+            check_outputs({"-o": ("imported.h5", "run")}, [], remakes=remakes)
+    assert check_outputs({"-o": ("run.h5", "run")}, [], remakes="simulation") is None
+    with pytest.raises(InvalidDataError, match="holds measurements"):
+        check_outputs({"-o": ("run.h5", "run")}, [], remakes="lab")

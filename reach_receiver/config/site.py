@@ -425,9 +425,10 @@ def _read_bounded(path: Path) -> str:
     or block forever: they are refused before reading.
     """
     fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OSError(f"{path} is not a regular file")
     with os.fdopen(fd, "rb") as handle:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise OSError(f"{path} is not a regular file")
         data = handle.read(MAX_SITE_BYTES + 1)
     if len(data) > MAX_SITE_BYTES:
         raise OSError(f"larger than {MAX_SITE_BYTES} bytes: not a site file")
