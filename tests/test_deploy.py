@@ -62,7 +62,10 @@ def test_example_site_loads_with_reach_settings():
     assert devices.tec.via == "teensy"
     assert devices.tc08.library == "/opt/picotech/lib/libusbtc08.so"
     spectrometer = devices.spectrometer
-    assert (spectrometer.host, spectrometer.port, spectrometer.period_s) == ("0.0.0.0", 4660, 1.0)
+    assert (spectrometer.port, spectrometer.period_s) == (4660, 1.0)
+    # Spectra only from the iTPM, on the spectrometer's network alone.
+    assert ipaddress.ip_address(spectrometer.source).is_private
+    assert ipaddress.ip_address(spectrometer.host).is_private
     assert site.references["test_load"].startswith("/etc/reach/")
 
 
