@@ -5,6 +5,10 @@ directory), ``reach-run schedule.yaml`` checks the schedule locally, sends it wi
 file it includes, prints the job's progress as it comes, and exits with the run's
 outcome (0 completed, 1 otherwise). Ctrl-C detaches: the run goes on in the daemon and
 ``reach-run --attach [JOB]`` follows it again. ``--detach`` submits and returns at once.
+
+A daemon that will not talk to this user says so ("refused: not a member of the
+service's group"), and one that cannot be reached is named with the reason; neither is
+taken for a daemon that is not there.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import threading
 from typing import Any
 
 from reach_receiver.daemon.client import DaemonClient
-from reach_receiver.daemon.protocol import ControlError
+from reach_receiver.daemon.protocol import Closed, ControlError
 from reach_receiver.schedule.steps import Schedule
 from reach_receiver.schedule.timing import hms
 
@@ -26,6 +30,9 @@ def submit(client: DaemonClient, schedule: Schedule, path: str, detach: bool) ->
     """Send a compiled schedule's files; follow the job unless ``detach``."""
     try:
         answer = client.request("submit", schedule=path, files=dict(schedule.files))
+    except (Closed, OSError) as err:
+        print(f"reach-run: {_unreached(client, err)}", file=sys.stderr)
+        return 1
     except ControlError as err:
         print(f"reach-run: the daemon refused {path}: {err}", file=sys.stderr)
         for problem in err.problems:
@@ -61,8 +68,8 @@ def follow(client: DaemonClient, job: int | None) -> int:
     except KeyboardInterrupt:
         print(f"\ndetached from job {which}; it goes on. Again: reach-run --attach {which}")
         return 0
-    except ControlError as err:
-        print(f"reach-run: {err}", file=sys.stderr)
+    except (ControlError, OSError) as err:
+        print(f"reach-run: {_unreached(client, err)}", file=sys.stderr)
         return 1
     return 0 if state == "completed" else 1
 
@@ -93,8 +100,8 @@ def steer(client: DaemonClient, op: str, **fields: Any) -> int:
     """One request (status, queue, cancel, abort, resume), its reply printed."""
     try:
         answer = client.request(op, **fields)
-    except ControlError as err:
-        print(f"reach-run: {err}", file=sys.stderr)
+    except (ControlError, OSError) as err:
+        print(f"reach-run: {_unreached(client, err)}", file=sys.stderr)
         return 1
     if op == "status":
         print(answer["status"])
@@ -111,3 +118,10 @@ def steer(client: DaemonClient, op: str, **fields: Any) -> int:
     else:
         print(f"{op}: done" + (f" (job {answer['job']['id']})" if answer.get("job") else ""))
     return 0
+
+
+def _unreached(client: DaemonClient, err: Exception) -> str:
+    """What went wrong with the daemon, as a user reads it (an ``OSError`` named)."""
+    if isinstance(err, OSError):
+        return f"the daemon at {client.path} cannot be reached: {err.strerror or err}"
+    return str(err)

@@ -1,15 +1,25 @@
-"""A client of the daemon's control socket (:mod:`.protocol`), as ``reach-run`` uses it."""
+"""A client of the daemon's control socket (:mod:`.protocol`), as ``reach-run`` uses it.
+
+A daemon that will not talk to this user (the socket's mode, or the daemon's own check
+of the peer's group) is a :class:`~.protocol.Closed` refusal that says so, not a daemon
+that is missing. A connection the daemon ended while it was idle is opened again before
+the next request (the request had not been sent).
+"""
 
 from __future__ import annotations
 
 import contextlib
+import select
 import socket
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
 
 from .control import SOCKET_FILE
-from .protocol import MAX_LINE, ControlError, decode, encode
+from .protocol import MAX_LINE, Closed, ControlError, decode, encode
+
+#: What a user outside the service's group is told.
+NOT_A_MEMBER = "refused: not a member of the service's group"
 
 
 def socket_path(runtime_dir: Path) -> Path:
@@ -18,12 +28,18 @@ def socket_path(runtime_dir: Path) -> Path:
 
 
 def daemon_answers(path: Path, timeout_s: float = 2.0) -> bool:
-    """Whether a daemon listens on ``path`` (a socket file alone is not enough)."""
+    """Whether a daemon listens on ``path`` (a socket file alone is not enough).
+
+    A daemon that refuses this user, or is busy, answers too: the request made next is
+    refused in turn, and says why.
+    """
     if not path.exists():
         return False
     try:
         with DaemonClient(path, timeout_s) as client:
             client.request("status")
+    except Closed:
+        return True
     except (OSError, ControlError):
         return False
     return True
@@ -32,12 +48,19 @@ def daemon_answers(path: Path, timeout_s: float = 2.0) -> bool:
 class DaemonClient:
     """One connection to the daemon; requests in turn, replies as dicts.
 
+    The connection is opened by the first request (or :meth:`connect`), so that a
+    refusal to connect comes where requests' refusals are handled.
+
     Raises
     ------
+    Closed
+        The daemon ended the connection and said why (:mod:`.protocol`): ``why`` is
+        ``refused`` for a user outside the service's group (told by the kernel or by
+        the daemon), ``busy`` when it has too many connections, ...
     ControlError
         For a refusal (with its ``problems``), or a reply that breaks the protocol.
     OSError
-        When the daemon cannot be reached (``PermissionError``: not in its group).
+        When the daemon cannot be reached.
     """
 
     def __init__(self, path: Path, timeout_s: float = 10.0) -> None:
@@ -48,7 +71,6 @@ class DaemonClient:
         self._lines: Iterator[bytes] | None = None
 
     def __enter__(self) -> DaemonClient:
-        self.connect()
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -60,6 +82,9 @@ class DaemonClient:
         sock.settimeout(self.timeout_s)
         try:
             sock.connect(str(self.path))
+        except PermissionError:  # the socket's mode: the kernel's refusal
+            sock.close()
+            raise Closed(f"{NOT_A_MEMBER} (no permission to open {self.path})", "refused") from None
         except OSError:
             sock.close()
             raise
@@ -77,6 +102,8 @@ class DaemonClient:
             self._socket = None
 
     def _send(self, op: str, fields: dict[str, Any]) -> None:
+        if self._socket is not None and self._ended_by_daemon():
+            self.close()
         if self._socket is None:
             self.connect()
         assert self._socket is not None
@@ -85,15 +112,28 @@ class DaemonClient:
         with contextlib.suppress(BrokenPipeError, ConnectionResetError):
             self._socket.sendall(encode({"op": op, **fields}))
 
+    def _ended_by_daemon(self) -> bool:
+        """Whether the daemon spoke unasked: only to close an idle connection (or EOF)."""
+        assert self._socket is not None
+        # poll, not select (no limit on descriptor numbers) nor a socket call (a timeout
+        # set on the socket would make even a non-blocking recv wait for it).
+        poller = select.poll()
+        poller.register(self._socket, select.POLLIN)
+        return bool(poller.poll(0))  # a last word, the end of the stream, or an error
+
     def _receive(self) -> dict[str, Any]:
         assert self._lines is not None
         try:
             line = next(self._lines)
         except StopIteration:
             raise ControlError("the daemon closed the connection") from None
-        if len(line) > MAX_LINE:
+        if len(line) > MAX_LINE + 1:
             raise ControlError("reply too long")
-        return decode(line)
+        message = decode(line)
+        if not message.get("ok") and message.get("closed"):
+            self.close()
+            raise Closed(str(message.get("error", "closed")), str(message["closed"]))
+        return message
 
     def request(self, op: str, **fields: Any) -> dict[str, Any]:
         """Send one request; its reply, or :class:`ControlError` for a refusal."""
