@@ -116,11 +116,11 @@ def serve() -> None:
                 sys.stdout.flush()
                 sys.stderr.flush()
                 os._exit(code)
-        code, cpu_s = _wait(pid, HANG_S)
+        status, cpu_s = _wait(pid, HANG_S)
         texts = {n: (out / n).read_text(errors="replace") for n in ("stdout", "stderr")}
         valid_file = out / "valid"
         valid = json.loads(valid_file.read_text()) if valid_file.exists() else None
-        answer = {"code": code, "cpu_s": cpu_s, **texts, "valid": valid}
+        answer = {"code": status, "cpu_s": cpu_s, **texts, "valid": valid}
         print(json.dumps(answer), flush=True)
 
 
@@ -249,6 +249,8 @@ class Checker:
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+        if self.process.stdout is not None:
+            self.process.stdout.close()
 
 
 def judge(case: Case, answer: Answer, cpu_s: float, valid: dict[str, Any] | None) -> Trial:
@@ -263,8 +265,8 @@ def judge(case: Case, answer: Answer, cpu_s: float, valid: dict[str, Any] | None
         if case.expect == "invalid":
             return Trial(case.name, "silent", "an invalid schedule accepted (exit 0)")
         if valid is None or not valid.get("valid"):
-            why = valid.get("why") if valid else "no judgement"
-            return Trial(case.name, "silent", f"accepted, but {why}")
+            reason = valid.get("why") if valid else "no judgement"
+            return Trial(case.name, "silent", f"accepted, but {reason}")
         return Trial(case.name, "clean", f"valid, accepted ({cpu_s:.2f} s CPU)")
     if not PROBLEM.search(answer.stderr):
         return Trial(case.name, "silent", f"refused without file:line: key: {detail}")

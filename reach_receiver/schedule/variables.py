@@ -95,6 +95,16 @@ def extent(value: Any) -> tuple[int, int]:
     return measure(value)
 
 
+def _too_large(size: int, depth: int) -> str | None:
+    """Why a variable's value of ``size`` values nested ``depth`` deep is refused."""
+    if depth > MAX_VALUE_DEPTH:
+        return f"nests more than {MAX_VALUE_DEPTH} deep once its variables are substituted"
+    if size > MAX_VALUE_NODES:
+        limit = MAX_VALUE_NODES
+        return f"holds {size:,} values once its variables are substituted; at most {limit:,}"
+    return None
+
+
 class Variables:
     """Resolves ``${...}`` references against the schedule's variables and the site.
 
@@ -156,16 +166,9 @@ class Variables:
         finally:
             self._resolving.pop()
         size, depth = extent(value)
-        message = None
-        if depth > MAX_VALUE_DEPTH:
-            message = f"nests more than {MAX_VALUE_DEPTH} deep once its variables are substituted"
-        elif size > MAX_VALUE_NODES:
-            message = (
-                f"holds {size:,} values once its variables are substituted;"
-                f" at most {MAX_VALUE_NODES:,}"
-            )
-        if message is not None:
-            where = Problem(definition.file, definition.line, f"vars.{name}", message)
+        too_large = _too_large(size, depth)
+        if too_large is not None:
+            where = Problem(definition.file, definition.line, f"vars.{name}", too_large)
             self._problems.append(where)
             value = UNRESOLVED
         self._values[name] = value
