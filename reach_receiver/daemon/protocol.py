@@ -100,7 +100,7 @@ def decode(line: bytes) -> dict[str, Any]:
     except RecursionError:
         raise ControlError("not JSON: nested too deeply") from None
     except ValueError as err:  # JSONDecodeError, and int()'s limit on digits
-        raise ControlError(f"not JSON: {str(err)[:120]}") from None
+        raise ControlError(f"not JSON: {str(err).split(';')[0][:120]}") from None
     if not isinstance(message, dict):
         raise ControlError("a message is a JSON object")
     if message.get("v") != VERSION:
