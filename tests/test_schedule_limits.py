@@ -335,3 +335,11 @@ def test_real_schedules_far_from_the_bounds_are_accepted(tmp_path):
         schedule = compile_schedule(path, site=planning_site(period_s=1.0), start_utc=START)
         assert time.process_time() - began < CPU_S
         assert schedule.steps
+
+
+def test_a_chain_of_variables_is_refused_whatever_order_they_are_resolved_in(tmp_path):
+    lines = ["schedule: c", "vars:", "  v0: hot"]
+    lines += [f'  v{i}: "${{v{i - 1}}}"' for i in range(1, 40)]
+    lines += ["steps: [initialise]"]  # resolved in the order written: one level at a time
+    problems = refused(written(tmp_path, "\n".join(lines) + "\n"))
+    assert one(problems, "vars.v16", "through more than 16 variables").line == 19

@@ -587,7 +587,8 @@ def trials(workdir: Path, quick: bool) -> Iterator[Trial]:
         for case, trial in checked[:: max(1, len(checked) // 6)]:
             if case.path.is_fifo() or not case.path.exists():
                 continue
-            direct = run_command(["reach-run", *ARGV, str(case.path)], timeout_s=HANG_S)
+            # a cold start (imports, astropy's tables) takes seconds, more on a busy machine
+            direct = run_command(["reach-run", *ARGV, str(case.path)], timeout_s=4 * HANG_S)
             agrees = (direct.code == 0) == (trial.detail.startswith("valid"))
             verdict = trial.verdict if agrees and not direct.traceback else "crash"
             yield Trial(f"reach-run itself: {case.name}", verdict, direct.message[:160])

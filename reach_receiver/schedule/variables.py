@@ -95,8 +95,14 @@ def extent(value: Any) -> tuple[int, int]:
     return measure(value)
 
 
-def _too_large(size: int, depth: int) -> str | None:
-    """Why a variable's value of ``size`` values nested ``depth`` deep is refused."""
+def _too_large(size: int, depth: int, chain: int) -> str | None:
+    """Why a variable is refused, or ``None``.
+
+    Its value holds ``size`` values nested ``depth`` deep; it is defined through a chain
+    of ``chain`` variables, itself included.
+    """
+    if chain > MAX_NESTING:
+        return f"defined through more than {MAX_NESTING} variables, one using the next"
     if depth > MAX_VALUE_DEPTH:
         return f"nests more than {MAX_VALUE_DEPTH} deep once its variables are substituted"
     if size > MAX_VALUE_NODES:
@@ -135,6 +141,10 @@ class Variables:
         self._values: dict[str, Any] = {}
         self._sizes: dict[str, int] = {}
         self._resolving: list[str] = []
+        # how many variables deep each one is defined (1: through none), and, while one
+        # is resolved, the deepest of those it uses
+        self._chains: dict[str, int] = {}
+        self._below: list[int] = []
 
     def values(self) -> dict[str, Any]:
         """Every variable's resolved value (resolving those not used yet)."""
@@ -146,6 +156,12 @@ class Variables:
         """The value of variable ``name`` used at ``file:line`` under ``key``."""
         if name.startswith("site."):
             return self._site_value(name.removeprefix("site."), file, line, key)
+        value = self._lookup(name, file, line, key)
+        if self._below:  # the variable being resolved is defined through this one
+            self._below[-1] = max(self._below[-1], self._chains.get(name, 0))
+        return value
+
+    def _lookup(self, name: str, file: str, line: int, key: str) -> Any:
         if name in self._values:
             return self._values[name]
         if name in self._resolving:
@@ -161,12 +177,14 @@ class Variables:
             raise LimitExceeded(Problem(file, line, key, message))
         definition = self._defined[name]
         self._resolving.append(name)
+        self._below.append(0)
         try:
             value = self.resolve(definition.value, definition.file, definition.line, f"vars.{name}")
         finally:
             self._resolving.pop()
+            self._chains[name] = self._below.pop() + 1
         size, depth = extent(value)
-        too_large = _too_large(size, depth)
+        too_large = _too_large(size, depth, self._chains[name])
         if too_large is not None:
             where = Problem(definition.file, definition.line, f"vars.{name}", too_large)
             self._problems.append(where)
