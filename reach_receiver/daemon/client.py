@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import select
 import socket
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -20,6 +21,8 @@ from .protocol import MAX_LINE, Closed, ControlError, decode, encode
 
 #: What a user outside the service's group is told.
 NOT_A_MEMBER = "refused: not a member of the service's group"
+#: The pauses before a request the daemon could not take is sent again (module's text).
+RETRY_PAUSES_S = (0.1, 0.3, 0.6)
 
 
 def socket_path(runtime_dir: Path) -> Path:
@@ -136,9 +139,21 @@ class DaemonClient:
         return message
 
     def request(self, op: str, **fields: Any) -> dict[str, Any]:
-        """Send one request; its reply, or :class:`ControlError` for a refusal."""
-        self._send(op, fields)
-        answer = self._receive()
+        """Send one request; its reply, or :class:`ControlError` for a refusal.
+
+        A connection the daemon closed before it read the request (``idle``: dropped
+        for another client; ``busy``: too many connections) is tried again a few times
+        on a new one: the request was not taken, so sending it again is safe.
+        """
+        for pause_s in (*RETRY_PAUSES_S, None):
+            self._send(op, fields)
+            try:
+                answer = self._receive()
+                break
+            except Closed as err:
+                if err.why not in ("idle", "busy") or pause_s is None:
+                    raise
+                time.sleep(pause_s)
         if not answer.get("ok"):
             raise ControlError(str(answer.get("error", "refused")), answer.get("problems"))
         return answer
