@@ -343,3 +343,26 @@ def test_a_chain_of_variables_is_refused_whatever_order_they_are_resolved_in(tmp
     lines += ["steps: [initialise]"]  # resolved in the order written: one level at a time
     problems = refused(written(tmp_path, "\n".join(lines) + "\n"))
     assert one(problems, "vars.v16", "through more than 16 variables").line == 19
+
+
+def test_the_daemons_compile_of_sent_files_is_bounded_too():
+    # reachd compiles what a client sent with schedule_reader: the same bounds apply
+    from reach_receiver.daemon.running import schedule_reader
+
+    bomb = ["schedule: v", "include: [more.yaml]", "vars:", "  v0: [hot, cold]"]
+    bomb += [f'  v{i}: ["${{v{i - 1}}}", "${{v{i - 1}}}"]' for i in range(1, 40)]
+    inner = "{connect: {source: hot}}"
+    for _ in range(18):
+        inner = f"{{repeat: {{count: 2, steps: [{inner}]}}}}"
+    top = "\n".join([*bomb, "steps: [initialise]"]) + "\n"
+    for more, key, says in (
+        ("vars: {}\n", "vars.v12", "16,383 values"),
+        (f"blocks:\n  deep: [{inner}]\n", "repeat.steps", "nested more than 16 deep"),
+    ):
+        sent = {"top.yaml": top, "more.yaml": more}
+        began = time.process_time()
+        with pytest.raises(ScheduleError) as caught:
+            language.compile_text(top, "top.yaml", kinds=STANDARD_KINDS, site=SITE,
+                                  read=schedule_reader(sent))
+        assert time.process_time() - began < CPU_S
+        one(caught.value.problems, key, says)
