@@ -366,3 +366,14 @@ def test_the_daemons_compile_of_sent_files_is_bounded_too():
                                   read=schedule_reader(sent))
         assert time.process_time() - began < CPU_S
         one(caught.value.problems, key, says)
+
+
+def test_integers_in_units_are_not_taken_for_counts(tmp_path):
+    text = (
+        "schedule: f\nsteps:\n  - initialise: {rails: [tec]}\n  - tec: {setpoint_c: 25}\n"
+        "  - vna_calibrate: {sweep: {f_start_hz: 40000000, f_stop_hz: 200000000, points: 2001}}\n"
+        "  - s11: {targets: [hot]}\n  - dicke: {sources: [hot], seconds: 3000000}\n"
+        "  - calibrate: {f_lo_hz: 50000000, f_hi_hz: 130000000}\n"
+    )
+    schedule = compile_schedule(written(tmp_path, text), site=SITE, start_utc=START)
+    assert schedule.steps[-1].f_lo_hz == 50e6

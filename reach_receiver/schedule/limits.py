@@ -36,8 +36,9 @@ bound                       value        what it limits
 ==========================  ===========  ==================================================
 
 Numbers are bounded by their key's unit suffix (:func:`number_problem`): ``*_s`` and
-``seconds`` are durations, ``*_utc`` times, other integers counts; a value written
-under any key must be finite. The kinds then check their own ranges (a duration > 0,
+``seconds`` are durations, ``*_utc`` times, ``*_hz``, ``*_c`` ... quantities
+(:data:`UNIT_SUFFIXES`), and other integers counts; a value written under any key must
+be finite. The kinds then check their own ranges (a duration > 0,
 a TEC setpoint within the TEC's range) on a value that can no longer overflow.
 """
 
@@ -64,6 +65,8 @@ MAX_DURATION_S = 10 * 365.25 * 86_400.0
 MAX_COUNT = 1_000_000
 MAX_NUMBER = 1e12
 UTC_YEARS = (2000, 2199)
+#: Keys ending so name a quantity in a unit (``f_lo_hz``, ``setpoint_c``), never a count.
+UNIT_SUFFIXES = ("_hz", "_c", "_dbm", "_db", "_deg", "_h", "_k", "_sigma")
 
 
 class LimitExceeded(Exception):
@@ -99,7 +102,7 @@ def number_problem(key: str, value: object) -> str | None:
         if abs(value) > MAX_DURATION_S:
             return f"must be at most {MAX_DURATION_S:.4g} s ({duration_text(MAX_DURATION_S)})"
         return None
-    if isinstance(value, int):
+    if isinstance(value, int) and not name.endswith(UNIT_SUFFIXES):
         if abs(value) > MAX_COUNT:
             return f"must be at most {MAX_COUNT:,} (in magnitude)"
         return None
