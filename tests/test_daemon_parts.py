@@ -224,3 +224,26 @@ def test_timers_json_is_written_atomically(tmp_path):
     assert not list(tmp_path.glob(".timers.json*"))
     del t
     assert timedelta(seconds=SIDEREAL_DAY_S) < timedelta(days=1)
+
+
+@pytest.mark.parametrize("text", ["", "garbage{", '{"jobs": 3, "next_id": 1}',
+                                  '{"jobs": [{"id": 5}], "next_id": 2}'])
+def test_an_unreadable_queue_file_is_kept_aside_and_the_queue_starts_empty(tmp_path, text):
+    path = tmp_path / "queue.json"
+    path.write_text(text)
+    queue = JobQueue(path)
+    assert queue.jobs() == []
+    assert queue.read_error is not None and "unreadable" in queue.read_error
+    (aside,) = tmp_path.glob("queue.json.unreadable-*")
+    assert aside.read_text() == text
+    queue.add("x", "x.yaml", {}, "test", 0.0)
+    assert [j.id for j in JobQueue(path).jobs()] == [1]
+
+
+def test_an_unreadable_timers_file_is_kept_aside_and_nothing_counts_as_missed(tmp_path):
+    path = tmp_path / "timers.json"
+    path.write_text('{"fired": {"nightly": "soon"}, "checked": 1}')
+    timers = Timers(DaemonSettings(), 21.0, path)
+    assert timers.read_error is not None and "unreadable" in timers.read_error
+    assert (timers.fired, timers.checked) == ({}, None)
+    assert len(list(tmp_path.glob("timers.json.unreadable-*"))) == 1

@@ -25,6 +25,8 @@ from typing import Any, Literal
 
 from calibration.atomic_file import write_atomically
 
+from .state_file import read_state
+
 log = logging.getLogger(__name__)
 
 JobState = Literal["queued", "running", "completed", "failed", "interrupted", "cancelled"]
@@ -77,10 +79,11 @@ class JobQueue:
         #: Why the last write of the queue file failed (``None``: it is up to date).
         self.write_error: str | None = None
         self._failed_at = 0.0
-        if self.path.exists():
-            data = json.loads(self.path.read_text())
-            self._jobs = [Job(**job) for job in data["jobs"]]
-            self._next = int(data["next_id"])
+        #: Why the queue file could not be read at start (``None``: it was, or was absent).
+        self.read_error: str | None = None
+        found, self.read_error = read_state(self.path, _parse_queue)
+        if found is not None:
+            self._jobs, self._next = found
 
     def add(
         self,
@@ -155,3 +158,12 @@ class JobQueue:
         with self._lock:
             if self.write_error is not None and time.monotonic() - self._failed_at >= RETRY_S:
                 self.save()
+
+
+def _parse_queue(data: Any) -> tuple[list[Job], int]:
+    """The jobs and the next id of a queue file's JSON (``KeyError``/``TypeError`` if not)."""
+    jobs = [Job(**job) for job in data["jobs"]]
+    next_id = int(data["next_id"])
+    if any(not isinstance(j.id, int) or j.id >= next_id for j in jobs):
+        raise ValueError("a job's id is not below next_id")
+    return jobs, next_id

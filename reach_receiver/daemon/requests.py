@@ -115,7 +115,11 @@ class ControlRequests(JobRunning):
     def _resume(self, peer: Peer) -> bool:
         with self._loop:
             self.paused = False
-            self.alarms.pop("run", None)
+            # The operator has seen them: a failed run, and what the start found (a state
+            # file moved aside, a run recovery could not merge).
+            for cause in [c for c in self.alarms
+                          if c == "run" or c.endswith(" at start") or c.startswith("recovery ")]:
+                del self.alarms[cause]
             if self.machine.state == "faulted" and "link" not in self.alarms:
                 self.machine.go("idle", f"resumed by uid {peer.uid}")
             return True

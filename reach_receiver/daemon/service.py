@@ -141,6 +141,7 @@ class Daemon(ControlRequests):
         if made_safe:
             self._link_failed(f"front-end unreachable at start: {made_safe}")
         self._recover()
+        self._state_file_alarms()
         # The first sidereal time costs a second (astropy's tables): not in a first run.
         apparent_lst_h([self.clock.now()], self.site.longitude_deg)
         for trigger in self.timers.start(self.clock.now()):
@@ -206,6 +207,7 @@ class Daemon(ControlRequests):
             self.watchdog.feed(self.healthy())
             self._collect()
             self.queue.retry()  # a queue file a full disk refused, written once there is room
+            self._state_file_alarms()
             now = self.clock.now()
             for trigger in self.timers.due(now):
                 self._queue_timer(trigger)
@@ -219,6 +221,21 @@ class Daemon(ControlRequests):
             if line != self._status:
                 self._status = line
                 self.notifier.status(line)
+
+    def _state_file_alarms(self) -> None:
+        """Alarms for the state files: one while a file is not written (a full disk).
+
+        And one for a file that could not be read at start (moved aside; ``resume``
+        clears it).
+        """
+        for name, holder in (("queue file", self.queue), ("timers file", self.timers)):
+            if holder.write_error:
+                self.alarms[name] = holder.write_error
+            else:
+                self.alarms.pop(name, None)
+            if holder.read_error:
+                self.alarms[f"{name} at start"] = holder.read_error
+                holder.read_error = None
 
     def healthy(self) -> bool:
         """Whether the daemon works: its socket serves and a run's worker is alive."""

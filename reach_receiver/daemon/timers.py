@@ -23,10 +23,13 @@ import logging
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
+from typing import Any
 
 from calibration.atomic_file import write_atomically
 from reach_receiver.config.daemon import DaemonSettings, TimerSettings
 from reach_receiver.schedule.lst import SIDEREAL_RATE, next_utc_at_lst
+
+from .state_file import read_state
 
 log = logging.getLogger(__name__)
 
@@ -81,10 +84,11 @@ class Timers:
         #: Why the last write of the state file failed (``None``: it is up to date).
         self.write_error: str | None = None
         self._written = -float("inf")
-        if self.path.exists():
-            state = json.loads(self.path.read_text())
-            self.fired = {k: float(v) for k, v in state.get("fired", {}).items()}
-            self.checked = state.get("checked")
+        #: Why the state file could not be read at start (``None``: it was, or was absent).
+        self.read_error: str | None = None
+        found, self.read_error = read_state(self.path, _parse_state)
+        if found is not None:
+            self.fired, self.checked = found
 
     def start(self, now: float) -> list[Trigger]:
         """At the daemon's start: the occurrences missed while it was down, per the policy."""
@@ -146,6 +150,13 @@ class Timers:
         if self.write_error is not None:
             log.warning("%s: written again", self.path)
         self.write_error = None
+
+
+def _parse_state(data: Any) -> tuple[dict[str, float], float | None]:
+    """When each timer last fired and when they were last checked, from the JSON."""
+    fired = {str(k): float(v) for k, v in data.get("fired", {}).items()}
+    checked = data.get("checked")
+    return fired, None if checked is None else float(checked)
 
 
 def _utc(at: float) -> str:
