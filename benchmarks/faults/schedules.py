@@ -236,7 +236,10 @@ class Checker:
         request = {"args": [*ARGV, str(path)], "out": str(self.out), "oracle": oracle}
         self.process.stdin.write(json.dumps(request) + "\n")
         self.process.stdin.flush()
-        answer = json.loads(self.process.stdout.readline())
+        line = self.process.stdout.readline()
+        if not line:
+            raise RuntimeError(f"the fork server stopped while checking {path}")
+        answer = json.loads(line)
         code = answer["code"]
         return Answer(code, answer["stdout"], answer["stderr"]), answer["cpu_s"], answer["valid"]
 
