@@ -1,4 +1,4 @@
-"""The control socket: a Unix stream server for the service's group, one thread a client.
+"""The control socket: a Unix stream server for the service's group.
 
 The socket ``<runtime_dir>/control.sock`` is created ``0660`` in the runtime directory's
 group (the service's group under systemd), so the kernel refuses anyone else at
@@ -8,11 +8,12 @@ that group that it is refused. Every request is logged with the peer's uid. Requ
 are handled by the daemon's dispatcher (:mod:`.protocol` for the messages): a reply, or
 for ``follow`` an iterator of messages streamed until it ends or the client goes away.
 
-No local client can stop the server: lines are bounded while they are read, idle and
-half-finished clients are timed out, connections are limited (:mod:`.connections`), every
-line that is not a request is answered, a burst of connects waits in a long backlog, and
-when no file descriptor is left ``accept`` rests and tries again (dropping an idle
-client to free one) instead of ending the thread. The socket file is removed on close
+No local client can stop the server: one I/O thread (:mod:`.connections`) holds every
+connection waiting for a request, reads lines within bounds, times out idle and
+half-finished clients, limits connections, and when no file descriptor is left rests
+and tries again (dropping an idle client to free one) instead of ending; each complete
+line is answered in a thread of its own; every line that is not a request is answered;
+a burst of connects waits in a long backlog. The socket file is removed on close
 only if this server made it: a second daemon refused on its way in leaves the first
 one's socket alone.
 """
@@ -20,7 +21,6 @@ one's socket alone.
 from __future__ import annotations
 
 import contextlib
-import errno
 import grp
 import logging
 import os
@@ -29,13 +29,12 @@ import socket
 import stat
 import struct
 import threading
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .connections import Connection, ConnectionTable, Ended, Limits
+from .connections import Connection, Limits, Reactor
 from .protocol import ControlError, check_request, closing, decode, encode, refusal
 
 log = logging.getLogger(__name__)
@@ -44,10 +43,6 @@ SOCKET_FILE = "control.sock"
 SOCKET_MODE = 0o660
 #: The listen backlog at least (the kernel's own maximum when larger).
 BACKLOG = 128
-#: How long accepting rests when it cannot (no file descriptor left).
-ACCEPT_PAUSE_S = 0.1
-#: At most one warning in this long while accepting fails.
-ACCEPT_WARN_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -111,11 +106,12 @@ class ControlServer:
         self.dispatch = dispatch
         self.group = group
         self.limits = limits or Limits()
-        self.connections = ConnectionTable(self.limits)
+        self.connections: Reactor | None = None
         self._listener: socket.socket | None = None
         self._bound: tuple[int, int] | None = None  # (st_dev, st_ino) of the file it made
-        self._thread: threading.Thread | None = None
         self._closing = threading.Event()
+        self._streams = 0
+        self._lock = threading.Lock()
 
     def start(self) -> None:
         """Bind (replacing a stale socket file), set its mode and group, start accepting."""
@@ -134,16 +130,16 @@ class ControlServer:
         with contextlib.suppress(PermissionError):
             os.chown(self.path, -1, self.group)
         listener.listen(max(socket.SOMAXCONN, BACKLOG))  # a burst of clients waits its turn
-        listener.settimeout(0.5)
         self._listener = listener
-        self._thread = threading.Thread(target=self._accept, name="control-accept", daemon=True)
-        self._thread.start()
+        self.connections = Reactor(listener, self.limits, self._admit, self._handle)
+        self.connections.start()
         log.info("control socket %s (group %s)", self.path, _group_name(self.group))
 
     @property
     def serving(self) -> bool:
         """Whether the server accepts connections."""
-        return self._thread is not None and self._thread.is_alive() and not self._closing.is_set()
+        reactor = self.connections
+        return reactor is not None and reactor.thread.is_alive() and not self._closing.is_set()
 
     def close(self) -> None:
         """Stop accepting, close every client, remove the socket file if this server made it.
@@ -152,11 +148,10 @@ class ControlServer:
         alone, and so does one whose file was since replaced by another daemon's.
         """
         self._closing.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
+        if self.connections is not None:
+            self.connections.stop()
         if self._listener is not None:
             self._listener.close()
-        self.connections.drop_all()
         if self._bound is None:
             return
         with contextlib.suppress(FileNotFoundError):
@@ -165,74 +160,32 @@ class ControlServer:
                 self.path.unlink()
         self._bound = None
 
-    # ----------------------------------------------------------------- accepting
-    def _accept(self) -> None:
-        """Accept until closed; no error of ``accept`` ends the thread (module's text)."""
-        assert self._listener is not None
-        failed, warn_at = 0, 0.0
-        while not self._closing.is_set():
-            try:
-                connection, _ = self._listener.accept()
-            except TimeoutError:
-                continue
-            except OSError as err:
-                if self._closing.is_set():
-                    return
-                failed += 1
-                if time.monotonic() >= warn_at:  # once, then once a minute while it lasts
-                    log.warning("control: cannot accept a client (%s; %d time(s)); they wait",
-                                err, failed)
-                    failed, warn_at = 0, time.monotonic() + ACCEPT_WARN_S
-                if err.errno in (errno.EMFILE, errno.ENFILE):  # an idle client's descriptor
-                    self.connections.drop_idle("closed: the daemon is out of file descriptors")
-                time.sleep(ACCEPT_PAUSE_S)
-                continue
-            self._admit(connection)
+    # ----------------------------------------------------------------- from the I/O thread
+    def _admit(self, connection: Connection) -> str | None:
+        """Why a new client is refused (not in the group), or None."""
+        peer = connection.peer = peer_of(connection.sock)
+        if self.group is not None and in_group(peer, self.group):
+            return None
+        log.warning("control: refused uid %d (pid %d): not in the group", peer.uid, peer.pid)
+        return f"refused: not a member of the service's group (uid {peer.uid})"
 
-    def _admit(self, sock: socket.socket) -> None:
-        connection = Connection(sock, self.limits)
-        if self.connections.admit(connection):
-            try:
-                threading.Thread(
-                    target=self._serve, args=(connection,), name="control-client", daemon=True
-                ).start()
-                return
-            except RuntimeError:  # no thread to be had
-                self.connections.leave(connection)
-        connection.tell(encode(closing(
-            f"too many connections (at most {self.limits.clients}): try again", "busy")))
-        sock.close()
+    def _handle(self, connection: Connection, line: bytes) -> None:
+        threading.Thread(
+            target=self._work, args=(connection, line), name="control-client", daemon=True
+        ).start()
 
-    # ----------------------------------------------------------------- one client
-    def _serve(self, connection: Connection) -> None:
+    # ----------------------------------------------------------------- a request's thread
+    def _work(self, connection: Connection, line: bytes) -> None:
+        keep = False
         try:
-            peer = peer_of(connection.sock)
-            if self.group is None or not in_group(peer, self.group):
-                uid, pid = peer.uid, peer.pid
-                log.warning("control: refused uid %d (pid %d): not in the group", uid, pid)
-                connection.send(encode(closing(
-                    f"refused: not a member of the service's group (uid {uid})", "refused")))
-                return
-            while not self._closing.is_set():
-                try:
-                    line = connection.read_line()
-                except Ended as ended:
-                    if ended.why != "gone":
-                        _log_end(peer, ended)
-                        connection.tell(encode(closing(f"closed: {ended}", ended.why)))
-                    return
-                if not self._answer(connection, line, peer):
-                    return
+            keep = self._answer(connection, line, connection.peer)
         except OSError as err:  # the client went away, or stopped reading
             log.debug("control client: %s", err)
-        except Ended:  # dropped while answering: the server closes
-            pass
         except Exception:  # a bug must not take the daemon down with it
             log.exception("control: a client's thread failed")
         finally:
-            with contextlib.suppress(OSError):
-                connection.sock.close()
-            self.connections.leave(connection)
+            assert self.connections is not None
+            self.connections.give_back(connection, keep and not self._closing.is_set())
 
     def _answer(self, connection: Connection, line: bytes, peer: Peer) -> bool:
         """Handle one request; whether the connection stays open."""
@@ -258,18 +211,21 @@ class ControlServer:
 
     def _stream(self, connection: Connection, messages: Iterator[dict[str, Any]], op: str) -> bool:
         """Send a stream (follow) until it ends or the client leaves; whether to go on."""
-        if not self.connections.start_stream():
+        with self._lock:
+            free = self._streams < self.limits.streams
+            self._streams += free
+        if not free:
             connection.send(encode(refusal(
                 f"too many streams (at most {self.limits.streams}): try again")))
             return True
         try:
-            connection.streaming()
             for message in messages:
                 if self._closing.is_set():
                     return False
                 connection.send(_encoded(message, op))
         finally:
-            self.connections.end_stream()
+            with self._lock:
+                self._streams -= 1
         return True
 
 
@@ -280,12 +236,6 @@ def _encoded(message: dict[str, Any], op: str) -> bytes:
     except (TypeError, ValueError) as err:
         log.exception("control: the reply to %s cannot be sent", op)
         return encode(refusal(f"internal error: {type(err).__name__}: {err}"))
-
-
-def _log_end(peer: Peer, ended: Ended) -> None:
-    """An idle client closed is routine; a line too long or unfinished is worth a warning."""
-    level = logging.DEBUG if ended.why == "idle" else logging.WARNING
-    log.log(level, "control: closed uid %d (pid %d): %s", peer.uid, peer.pid, ended)
 
 
 def _remove_stale(path: Path) -> None:
