@@ -16,7 +16,10 @@
     reach-cal validate RUN.h5 --leave-one-out [...]  (calibration.cli_validate)
     reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf]  (calibration.cli_report)
 
-Files are those of :mod:`calibration.hdf5_io`. Errors an operator can act on (unreadable or
+Files are those of :mod:`calibration.hdf5_io`. No command writes over one of its inputs or
+a file holding measurements (:mod:`calibration.cli_files`); every numeric option is
+range-checked as it is parsed (:func:`calibration.cli_args.number_arg`); ``apply`` refuses
+a run on another channel grid than its solution's. Errors an operator can act on (unreadable or
 malformed files, unusable data, an unsolvable model) print ``reach-cal: error: <message>``
 on stderr without a traceback and exit with status 2, as do usage errors; success is 0.
 """
