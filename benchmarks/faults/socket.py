@@ -304,7 +304,8 @@ def _second_daemon(daemon: Daemon) -> tuple[bool | None, str]:
         capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
     )
     kept = daemon.path.exists() and daemon.path.stat().st_ino == inode
-    said = (done.stderr.strip().splitlines() or [""])[-1][:120]
+    said = next((line for line in reversed(done.stderr.splitlines())
+                 if line.startswith("reachd:")), "no message")[:120]
     if done.returncode == 0:
         return None, "a second daemon started"
     return kept and "Traceback" not in done.stderr, f"{said}; socket {'kept' if kept else 'GONE'}"
@@ -324,6 +325,7 @@ def _under_load(root: Path) -> Trial:
     held: list[socket.socket] = []
     asked: list[float | str] = []  # each status: its latency, or why it failed
     answered: list[int] = []  # one entry a garbage client answered
+    reopened: list[int] = []  # one entry an idle connection the daemon closed, opened again
     try:
         rss0 = daemon.rss_kib()
         start = time.monotonic()
@@ -331,7 +333,7 @@ def _under_load(root: Path) -> Trial:
             held.append(_connect(daemon.path))
         opened_s = time.monotonic() - start
         workers = [threading.Thread(target=_ask_status, args=(daemon, stop, asked)),
-                   threading.Thread(target=_keep_idle, args=(daemon, stop, held))]
+                   threading.Thread(target=_keep_idle, args=(daemon, stop, held, reopened))]
         workers += [threading.Thread(target=_send_garbage, args=(daemon, n, answered))
                     for n in range(GARBAGE_CLIENTS)]
         for worker in workers:
@@ -360,7 +362,8 @@ def _under_load(root: Path) -> Trial:
     ok.sort()
     median = ok[len(ok) // 2] if ok else float("nan")
     report = (
-        f"{IDLE} connects in {opened_s:.1f} s; run quick.yaml exit {run.returncode} in "
+        f"{IDLE} connects in {opened_s:.1f} s, {len(reopened)} more as the daemon dropped "
+        f"them; run quick.yaml exit {run.returncode} in "
         f"{run_s:.0f} s; status asked {len(asked)}: {len(ok)} answered (median "
         f"{median * 1e3:.0f} ms, max {max(ok, default=0) * 1e3:.0f} ms), {len(failed)} "
         f"not{' (' + failed[0][:60] + ')' if failed else ''}; garbage answered "
@@ -387,7 +390,9 @@ def _ask_status(daemon: Daemon, stop: threading.Event, asked: list[float | str])
             asked.append(str(state))
 
 
-def _keep_idle(daemon: Daemon, stop: threading.Event, held: list[socket.socket]) -> None:
+def _keep_idle(
+    daemon: Daemon, stop: threading.Event, held: list[socket.socket], reopened: list[int]
+) -> None:
     """Every 2 s, open again the idle connections the daemon closed."""
     while not stop.wait(2.0):
         for i, client in enumerate(held):
@@ -399,6 +404,7 @@ def _keep_idle(daemon: Daemon, stop: threading.Event, held: list[socket.socket])
                 client.close()
                 with contextlib.suppress(OSError):
                     held[i] = _connect(daemon.path)
+                    reopened.append(i)
 
 
 def _send_garbage(daemon: Daemon, n: int, answered: list[int]) -> None:
