@@ -24,4 +24,5 @@ def test_a_name_that_reads_as_a_path_stays_inside_the_runs_directory(sim, tmp_pa
     assert session.directory.parent == runs
     assert (session.directory / "run.h5").is_file()
     assert [p.name for p in tmp_path.iterdir()] == ["runs"]  # nothing written beside it
-    assert "/" not in session.directory.name and not session.directory.name.startswith(".")
+    assert "/" not in session.directory.name
+    assert not session.directory.name.startswith(".")
