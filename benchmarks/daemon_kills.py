@@ -116,15 +116,16 @@ def one_point(sim_site: dict[str, Any], root: Path, kill_at: float | None) -> di
     reachd.wait(timeout=60)
     problems = []
     for directory in sorted(p for p in runs.glob("*") if p.is_dir()):
-        if list_parts(directory) or not (directory / "run.h5").exists():
+        if list_parts(directory):  # (a directory killed before its first part holds none)
             problems.append(f"{directory.name}: not merged")
     for job in jobs:
         if job["run"] and (Path(job["run"]) / "run.h5").exists():
             status = read_run_file(Path(job["run"]) / "run.h5").status
             if status != job["state"]:
                 problems.append(f"job {job['id']} {job['state']} but its run {status}")
-    if not jobs or jobs[-1]["state"] != "completed":
-        problems.append(f"last job {jobs[-1]['state'] if jobs else 'missing'}")
+    last = max(jobs, key=lambda j: int(j["id"]), default=None)
+    if last is None or last["state"] != "completed":
+        problems.append(f"last job {last['state'] if last else 'missing'}")
     if idle["state"] != "idle":
         problems.append(f"daemon {idle['state']}")
     safe_s = [float(m.group(1)) for m in SAFE_LINE.finditer(log.read_text(errors="replace"))]
