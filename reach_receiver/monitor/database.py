@@ -46,8 +46,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-from reach_receiver.store.parts import RESERVE_BYTES
-from reach_receiver.store.space import MARGIN_BYTES, DiskFull, free_bytes
+from reach_receiver.disk import MARGIN_BYTES, RESERVE_BYTES, DiskFull, free_bytes
 
 from .readings import STATUSES, Reading, parse_key
 

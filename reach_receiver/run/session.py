@@ -37,6 +37,7 @@ from typing import Any
 
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
+from reach_receiver.disk import DiskFull
 from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor import Monitor
 from reach_receiver.schedule.compile import compile_schedule
@@ -46,7 +47,6 @@ from reach_receiver.schedule.steps import Schedule, Step
 from reach_receiver.schedule.timing import TimelineEntry, timeline
 from reach_receiver.store.parts import FILE_MODE, PARTS_DIR, StoreError, safe_name
 from reach_receiver.store.run_store import RunStore, software_versions
-from reach_receiver.store.space import DiskFull
 
 from .context import (
     CheckRecord,

@@ -7,15 +7,16 @@ measurements as taken and the REACH layout that :func:`calibration.hdf5_io.read_
 reads (:mod:`.merge`). :func:`read_run_file` reads a run back, merged or not;
 :mod:`.touchstone` re-exports the engine's Touchstone S1P/S2P reader and writer.
 :mod:`.handover` is the one place where a run's measurements become the calibration
-engine's input. :mod:`.space` refuses, by name, a write the disk has no room for.
+engine's input. :mod:`reach_receiver.disk` refuses, by name, a write the disk has no room for.
 """
+
+from reach_receiver.disk import DiskFull
 
 from .handover import HandOver
 from .merge import RUN_FILE, merge_run
 from .parts import StoreError
 from .reader import Measurement, RunContents, read_run_file
 from .run_store import DICKE_POSITIONS, EngineView, RunStore, software_versions
-from .space import DiskFull
 from .touchstone import TouchstoneError, read_touchstone, write_touchstone
 
 __all__ = [

@@ -30,7 +30,7 @@ attribute of ``/observation_data``.
 
 Merging is atomic (:func:`~reach_receiver.store.parts.atomic_h5`) and idempotent: the
 parts are deleted only after ``run.h5`` replaced its predecessor (a disk too full for
-the merged file is a :class:`~.space.DiskFull` that leaves every part in place), and a
+the merged file is a :class:`reach_receiver.disk.DiskFull` that leaves every part in place), and a
 new merge takes the union of the measurements already in ``run.h5`` and the parts still
 present, so a merge killed (or refused) at any point can simply be run again.
 """

@@ -3,8 +3,8 @@
 A run directory holds ``parts/NNNNNN-<kind>-<name>.h5``, numbered in the order the
 measurements completed. A part is built in memory, written under a temporary name in
 the same directory (``.NNNNNN-<kind>-<name>.h5.<random>.tmp``) once there is room for it
-(:mod:`.space`), ``fsync``-ed, moved onto its final name with :func:`os.replace` and the
-directory is ``fsync``-ed. ``rename`` within one
+(:mod:`reach_receiver.disk`), ``fsync``-ed, moved onto its final name with
+:func:`os.replace` and the directory is ``fsync``-ed. ``rename`` within one
 directory is atomic on POSIX file systems, and the directory sync makes the new name
 itself durable (the ext4/XFS rule: a rename is only on disk once its directory is). So a
 part is complete if and only if its final name exists; a process killed mid-write
@@ -31,9 +31,8 @@ from typing import Any
 import h5py
 import numpy as np
 
+from reach_receiver.disk import RESERVE_BYTES, write_durably
 from reach_receiver.errors import ReceiverError
-
-from .space import write_durably
 
 log = logging.getLogger(__name__)
 
@@ -57,8 +56,6 @@ UNITS_TEXT = "text"
 
 #: Kinds of the small records that close a run: they may use the reserve.
 CLOSING_KINDS = frozenset({"event", "status"})
-#: Room a measurement leaves free for the records that close the run (bytes).
-RESERVE_BYTES = 256 * 1024
 
 _PART_RE = re.compile(r"^(\d{6})-([a-z0-9_]+)-(.+)\.h5$")
 _SAFE_RE = re.compile(r"[^A-Za-z0-9_.+]+")
@@ -156,8 +153,8 @@ def atomic_h5(
 ) -> Iterator[Any]:
     """Yield a new HDF5 file that appears as ``target`` only once completely written.
 
-    The file is built in memory and written by :func:`~.space.write_durably`: HDF5 never
-    writes to the disk itself, so a full disk is a :class:`~.space.DiskFull` naming the
+    The file is built in memory and written by :func:`reach_receiver.disk.write_durably`: HDF5 never
+    writes to the disk itself, so a full disk is a :class:`reach_receiver.disk.DiskFull` naming the
     room there is and the room ``what`` needs (beyond ``reserve_bytes`` kept free), and
     the library is left as sound as before. The temporary sits beside ``target`` (same
     file system, so the rename is atomic), starts with a dot and ends in ``.tmp`` so
@@ -183,7 +180,7 @@ def write_part(
 ) -> Path:
     """Write one part durably: ``fill`` receives the open file; returns the final path.
 
-    A measurement is refused (:class:`~.space.DiskFull`) unless :data:`RESERVE_BYTES`
+    A measurement is refused (:class:`reach_receiver.disk.DiskFull`) unless :data:`RESERVE_BYTES`
     stay free after it, so that the records that close a run (:data:`CLOSING_KINDS`)
     still fit when the disk fills during the run.
     """

@@ -31,6 +31,8 @@ from reach_receiver.errors import ReceiverError
 
 #: Free space every write leaves at least (file-system metadata, log lines).
 MARGIN_BYTES = 64 * 1024
+#: Room a run's measurement leaves free for the records that close the run (bytes).
+RESERVE_BYTES = 256 * 1024
 #: Errors of a write that did not fit: no space, over quota, over the file-size limit.
 FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
 
