@@ -30,10 +30,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from calibration import figures
-from calibration.hdf5_io import write_run, write_solution
+from calibration.hdf5_io import write_run
 from calibration.radiometric_solver import solve_radiometric
 from calibration.report import calibrate_run, figure_builders, load_inputs, write_report
 from calibration.simulate import SimulationConfig, simulate_run
+from calibration.solution_file import write_solution
 
 #: The issue's target for one report (s).
 TARGET_S = 3.0

@@ -57,20 +57,14 @@ from .cli_report import add_report_command
 from .cli_validate import add_validate_command
 from .data import CalibrationData, SourceData
 from .errors import CalibrationError, InvalidDataError
-from .hdf5_io import (
-    read_run,
-    read_solution,
-    read_truth,
-    write_calibrated,
-    write_run,
-    write_solution,
-)
+from .hdf5_io import read_run, read_truth, write_run
 from .identifiability import caution_lines, model_choice_line
 from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .per_frequency import ChannelSolution
 from .polynomial_model import coefficient_slices
 from .simulate import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .solution import CalibratedSpectrum, Solution, check_grid, grid_metadata
+from .solution_file import read_solution, write_calibrated, write_solution
 from .solvers import AnySolution, band_hz, method_name, refit, solution_noise_floor
 from .vna_systematics import DEFAULT_CORRELATION_HZ, reflection_systematics
 

@@ -43,21 +43,14 @@ from numpy.typing import NDArray
 
 from . import figures
 from .data import CalibrationData, SourceData
-from .hdf5_io import (
-    RECEIVER_RUN_FORMAT,
-    PathLike,
-    read_run,
-    read_solution,
-    read_solution_group,
-    read_truth,
-    software_version,
-)
+from .hdf5_io import RECEIVER_RUN_FORMAT, PathLike, read_run, read_truth, software_version
 from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .per_frequency import ChannelSolution
 from .report_render import Section, render_html, render_markdown
 from .run_records import RunRecords, file_software, read_run_records
 from .simulate import ReceiverTruth
 from .solution import CalibratedSpectrum
+from .solution_file import read_solution, read_solution_group
 from .solvers import AnySolution, method_name, solution_noise_floor
 
 FloatArray = NDArray[np.float64]

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from calibration.cli import main
-from calibration.hdf5_io import read_run, read_solution, write_run
+from calibration.hdf5_io import read_run, write_run
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
+from calibration.solution_file import read_solution
 
 ORDERS = ["--orders", "4,3,4,4,3"]
 

@@ -25,10 +25,11 @@ from calibration.edges_import import (
     read_gain_table,
 )
 from calibration.errors import FileFormatError, InvalidDataError
-from calibration.hdf5_io import read_run, read_solution
+from calibration.hdf5_io import read_run
 from calibration.model_fit import OrderChoice
 from calibration.one_port import OnePortTerms
 from calibration.radiometric_solver import solve_radiometric
+from calibration.solution_file import read_solution
 from calibration.touchstone import read_touchstone, write_touchstone
 from calibration.vna_import import VnaLayout, correct_exports, read_cal_kit
 

@@ -18,7 +18,7 @@ from calibration.cli import main
 from calibration.cli_args import number_arg
 from calibration.cli_files import check_outputs
 from calibration.errors import InvalidDataError
-from calibration.hdf5_io import read_solution
+from calibration.solution_file import read_solution
 
 CALIBRATORS = "cold,hot,r25,r100,c10open,c10short"
 

@@ -9,17 +9,11 @@ import pytest
 
 from calibration.averaging import MixturePosterior
 from calibration.errors import FileFormatError, InvalidDataError
-from calibration.hdf5_io import (
-    FORMAT_VERSION,
-    read_run,
-    read_solution,
-    read_truth,
-    write_run,
-    write_solution,
-)
+from calibration.hdf5_io import FORMAT_VERSION, read_run, read_truth, write_run
 from calibration.model_fit import OrderChoice
 from calibration.radiometric_solver import solve_radiometric
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solution_file import read_solution, write_solution
 from calibration.thesis_solver import solve_thesis
 
 CFG = SimulationConfig(channel_width_hz=16 * ITPM_CHANNEL_WIDTH_HZ)

@@ -231,9 +231,10 @@ def test_a_source_the_averaged_models_disagree_on_is_noted(tmp_path, capsys):
     0.39-0.83 over the eight seeds of the test in test_errors_in_variables). ``reach-cal
     apply`` says so; twelve calibrators (0.004-0.006) do not."""
     from calibration.cli import main
-    from calibration.hdf5_io import write_run, write_solution
+    from calibration.hdf5_io import write_run
     from calibration.identifiability import CHOICE_SHARE, model_choice_line
     from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
+    from calibration.solution_file import write_solution
     from tests.test_errors_in_variables import beyond_run
 
     run = beyond_run(6)

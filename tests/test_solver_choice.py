@@ -22,11 +22,12 @@ from sites import DEVICES, planning_site
 
 from calibration.cli import main as reach_cal
 from calibration.errors import FileFormatError, InvalidDataError
-from calibration.hdf5_io import read_run, read_solution, read_truth, write_solution
+from calibration.hdf5_io import read_run, read_truth
 from calibration.noise_waves import design_terms, source_temperature
 from calibration.per_frequency import ChannelSolution
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 from calibration.solution import Solution
+from calibration.solution_file import read_solution, write_solution
 from calibration.solvers import (
     METHODS,
     PER_CHANNEL_METHODS,

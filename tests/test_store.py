@@ -9,9 +9,10 @@ import h5py
 import numpy as np
 import pytest
 
-from calibration.hdf5_io import read_run, read_solution_group
+from calibration.hdf5_io import read_run
 from calibration.model_fit import OrderChoice
 from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulatedRun, simulate_run
+from calibration.solution_file import read_solution_group
 from calibration.thesis_solver import solve_thesis
 from reach_receiver.store import (
     DICKE_POSITIONS,

@@ -22,7 +22,8 @@ import numpy as np
 
 from calibration.data import CalibrationData, SourceData
 from calibration.errors import FileFormatError
-from calibration.hdf5_io import RECEIVER_RUN_FORMAT, read_run, read_solution_group
+from calibration.hdf5_io import RECEIVER_RUN_FORMAT, read_run
+from calibration.solution_file import read_solution_group
 from calibration.solvers import AnySolution
 
 from .merge import (

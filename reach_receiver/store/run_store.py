@@ -44,7 +44,8 @@ import h5py
 import numpy as np
 
 from calibration.data import CalibrationData, SourceData
-from calibration.hdf5_io import RunLayout, write_solution_group
+from calibration.hdf5_io import RunLayout
+from calibration.solution_file import write_solution_group
 from calibration.solvers import AnySolution
 
 from .handover import RECEIVER, HandOver, engine_layout, select

@@ -37,8 +37,8 @@ from numpy.typing import NDArray
 from calibration import CalibrationData
 from calibration.data import SourceData
 from calibration.errors import FileFormatError, IllPosedError
-from calibration.hdf5_io import read_solution
 from calibration.reflection_noise import reflection_variance
+from calibration.solution_file import read_solution
 from calibration.solvers import METHODS, AnySolution, refit, solution_noise_floor, solver
 from calibration.vna_systematics import ReflectionSystematics, reflection_systematics
 from reach_receiver.config.fields import Fields
