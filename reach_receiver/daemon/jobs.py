@@ -23,9 +23,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from calibration.atomic_file import write_atomically
-
-from .state_file import read_state
+from .state_file import read_state, write_state
 
 log = logging.getLogger(__name__)
 
@@ -140,18 +138,9 @@ class JobQueue:
             for old in ended[:-KEEP_ENDED]:
                 self._jobs.remove(old)
             text = json.dumps({"next_id": self._next, "jobs": [asdict(j) for j in self._jobs]})
-            try:
-                write_atomically(self.path, text)
-            except OSError as err:
-                self._failed_at = time.monotonic()
-                error = f"{self.path}: not written, its previous state kept ({err.strerror or err})"
-                if error != self.write_error:
-                    log.error("%s", error)
-                self.write_error = error
-                return
+            self.write_error = write_state(self.path, text, self.write_error)
             if self.write_error is not None:
-                log.warning("%s: written again", self.path)
-            self.write_error = None
+                self._failed_at = time.monotonic()
 
     def retry(self) -> None:
         """Write the queue again if its last write failed (at most every :data:`RETRY_S`)."""

@@ -1,4 +1,8 @@
-"""Reading the daemon's own state files (``queue.json``, ``timers.json``) back at start.
+"""The daemon's own state files (``queue.json``, ``timers.json``): written, and read at start.
+
+A write that fails (a full disk) keeps the previous file and says so once
+(:func:`write_state`); the caller keeps its state in memory and writes again later.
+
 
 They are written atomically (:func:`calibration.atomic_file.write_atomically`), so a
 crash leaves either the old file or the new one; but a disk fault, a hand edit or a copy
@@ -17,6 +21,8 @@ from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TypeVar
+
+from calibration.atomic_file import write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -50,3 +56,21 @@ def read_state(path: Path, parse: Callable[[Any], T]) -> tuple[T | None, str | N
                    "the daemon started without it")
         log.error("%s", problem)
         return None, problem
+
+
+def write_state(path: Path, text: str, previous_error: str | None) -> str | None:
+    """Write ``text`` to ``path`` atomically; ``None``, or why it was not written.
+
+    A failure is logged once (while ``previous_error`` says the same), and the file
+    written again after one is logged too.
+    """
+    try:
+        write_atomically(path, text)
+    except OSError as err:
+        error = f"{path}: not written, its previous state kept ({err.strerror or err})"
+        if error != previous_error:
+            log.error("%s", error)
+        return error
+    if previous_error is not None:
+        log.warning("%s: written again", path)
+    return None

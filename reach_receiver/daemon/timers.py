@@ -25,11 +25,10 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
-from calibration.atomic_file import write_atomically
 from reach_receiver.config.daemon import DaemonSettings, TimerSettings
 from reach_receiver.schedule.lst import SIDEREAL_RATE, next_utc_at_lst
 
-from .state_file import read_state
+from .state_file import read_state, write_state
 
 log = logging.getLogger(__name__)
 
@@ -139,17 +138,8 @@ class Timers:
     def _save(self, now: float) -> None:
         self.checked = now
         self._written = now  # a failed write is tried again at the next checkpoint
-        try:
-            write_atomically(self.path, json.dumps({"fired": self.fired, "checked": now}))
-        except OSError as err:
-            error = f"{self.path}: not written, its previous state kept ({err.strerror or err})"
-            if error != self.write_error:
-                log.error("%s", error)
-            self.write_error = error
-            return
-        if self.write_error is not None:
-            log.warning("%s: written again", self.path)
-        self.write_error = None
+        state = json.dumps({"fired": self.fired, "checked": now})
+        self.write_error = write_state(self.path, state, self.write_error)
 
 
 def _parse_state(data: Any) -> tuple[dict[str, float], float | None]:
