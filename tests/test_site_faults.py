@@ -8,20 +8,11 @@ import os
 
 import pytest
 
+from benchmarks.faults.site_files import DEVICES, S1P, S2P
 from reach_receiver.cli import reachd_main, run_main
 from reach_receiver.config.site import SiteError, load_site
 
 SCHEDULE = os.path.join(os.path.dirname(__file__), "..", "schedules", "quick.yaml")
-DEVICES = """\
-devices:
-  teensy: {port: /dev/ttyACM0}
-  vna: {resource: "TCPIP0::10.0.0.2::5025::SOCKET"}
-  tec: {via: teensy}
-  tc08: {}
-  spectrometer: {port: 4660, period_s: 30.0}
-"""
-S1P = "# Hz S RI R 50\n50e6 0.01 0.0\n100e6 0.02 0.01\n"
-S2P = "# Hz S RI R 50\n50e6 0.01 0 0.9 0 0.9 0 0.01 0\n100e6 0.02 0 0.9 0 0.9 0 0.02 0\n"
 
 
 def site(tmp_path, text):
