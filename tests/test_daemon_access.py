@@ -90,7 +90,7 @@ def test_the_socket_admits_only_the_service_s_group(control_server):
 
 
 def test_a_member_of_the_group_is_answered_and_logged_with_its_uid(control_server, caplog):
-    with caplog.at_level(logging.INFO, logger="reach_receiver.daemon.control"):
+    with caplog.at_level(logging.DEBUG, logger="reach_receiver.daemon.control"):
         answer = ask_as(control_server.path, NOBODY, SERVICE_GROUP)
     assert answer == {"connect": "ok", "reply": {"v": 1, "ok": True, "uid": NOBODY}}
     assert f"status from uid {NOBODY}" in caplog.text

@@ -4,8 +4,10 @@ Two faces of one :class:`~reach_receiver.run.context.Progress`:
 
 * on a terminal, rich's live progress bar for the current step (which source and
   position, spectra so far, time left in the step) under one line per top-level step;
-* otherwise (a pipe, a log, ``nohup``), plain lines: one per top-level step, and inside a
-  step a line at each tenth of its progress, at most one a real second.
+* otherwise (a pipe, a log, ``nohup``), plain lines within 80 columns
+  (:mod:`reach_receiver.run.progress_lines`, which a followed job prints too): two per
+  top-level step, and inside a step a line at each tenth of its progress, at most one
+  a real second.
 
 Writing to a terminal that went away (SSH dropped: SIGHUP, then EIO or EPIPE on every
 write) must not stop the run from reaching its safe state, so a failed write silences
@@ -25,12 +27,22 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn
 from rich.progress import Progress as RichProgress
 
 from reach_receiver.clock import Clock
+from reach_receiver.run.progress_lines import (
+    Throttle,
+    real_seconds,
+    step_lines,
+    update_line,
+)
 from reach_receiver.schedule.steps import Step
 from reach_receiver.schedule.timing import hms
 
 
 class PlainProgress:
-    """Progress as plain lines on a stream (stderr by default)."""
+    """Progress as plain lines on a stream (stderr by default), within 80 columns.
+
+    The lines are :mod:`reach_receiver.run.progress_lines`', which a job followed
+    through ``reachd`` prints too.
+    """
 
     def __init__(self, clock: Clock, stream: TextIO | None = None) -> None:
         self.clock = clock
@@ -38,43 +50,32 @@ class PlainProgress:
         self.start = clock.now()
         self.real_start = time.monotonic()
         self._broken = False
-        self._last_fraction = -1.0
-        self._last_line = 0.0
+        self._throttle = Throttle()
 
-    def _write(self, line: str) -> None:
+    def _write(self, lines: list[str]) -> None:
         if self._broken:
             return
         try:
-            print(line, file=self.stream, flush=True)
+            print("\n".join(lines), file=self.stream, flush=True)
         except (OSError, ValueError):  # the terminal went away, or the stream was closed
             self._broken = True
 
     def started(self, directory: Path) -> None:
         """Say where the run's files go."""
-        self._write(f"run directory: {directory}")
+        self._write([f"run directory: {directory}"])
 
     def step(self, index: int, total: int, step: Step, text: str, left_s: float | None) -> None:
-        """One line per top-level step: position, time elapsed and left, where."""
-        elapsed = hms(self.clock.now() - self.start)
-        left = f", about {hms(left_s)} left" if left_s is not None else ""
-        real = time.monotonic() - self.real_start
-        self._last_fraction = -1.0
-        self._write(
-            f"[{index:>3}/{total}] {elapsed} elapsed{left} ({real:.1f} s real) | "
-            f"{text}  ({step.where})"
-        )
+        """Two lines per top-level step: what, then where, time elapsed and left."""
+        real = real_seconds(self.clock, time.monotonic() - self.real_start)
+        self._throttle.new_step()
+        self._write(step_lines(
+            index, total, text, str(step.where), self.clock.now() - self.start, left_s, real
+        ))
 
     def update(self, text: str, done: int, total: int, left_s: float | None) -> None:
         """A line at each tenth of the step's progress, at most one a real second."""
-        fraction = done / total if total else 1.0
-        now = time.monotonic()
-        if fraction - self._last_fraction < 0.1 and done < total:
-            return
-        if now - self._last_line < 1.0 and done < total:
-            return
-        self._last_fraction, self._last_line = fraction, now
-        left = f", {hms(left_s)} left in the step" if left_s is not None else ""
-        self._write(f"        {text}: {done}/{total}{left}")
+        if self._throttle.due(done, total, time.monotonic()):
+            self._write(update_line(text, done, total, left_s))
 
 
 class RichProgressDisplay:
@@ -113,18 +114,15 @@ class RichProgressDisplay:
         self.plain.started(directory)
 
     def step(self, index: int, total: int, step: Step, text: str, left_s: float | None) -> None:
-        """A step line above the bar; the bar is reset."""
+        """The plain display's step lines above the bar; the bar is reset."""
         if self._broken:
             return
-        elapsed = hms(self.plain.clock.now() - self.plain.start)
-        left = f", about {hms(left_s)} left" if left_s is not None else ""
+        real = real_seconds(self.plain.clock, time.monotonic() - self.plain.real_start)
+        elapsed = self.plain.clock.now() - self.plain.start
+        lines = step_lines(index, total, text, str(step.where), elapsed, left_s, real)
         try:
             self.bar.update(self.task, visible=False)
-            self.bar.console.print(
-                f"[bold][{index:>3}/{total}][/bold] {elapsed} elapsed{left} | {text}  "
-                f"[dim]({step.where})[/dim]",
-                highlight=False,
-            )
+            self.bar.console.print("\n".join(lines), markup=False, highlight=False)
         except OSError:
             self._broken = True
 

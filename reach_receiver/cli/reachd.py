@@ -24,6 +24,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from reach_receiver.clock import Clock, SystemClock
 from reach_receiver.config.daemon import DaemonSettings
@@ -33,6 +34,9 @@ from reach_receiver.devices.teensy import Teensy
 from reach_receiver.errors import ReceiverError
 
 from .logs import add_version, configure_logging
+
+if TYPE_CHECKING:
+    from reach_receiver.run.summary import Truth
 
 log = logging.getLogger("reach_receiver.daemon")
 
@@ -125,10 +129,12 @@ def _serve_sim(base: SiteConfig | None, args: argparse.Namespace) -> int:
         site = _with_sim(base, sim.site(), args)
         if args.site_out is not None:
             _write(args.site_out, site.to_yaml())
-        return _serve(site, sim.clock, args)
+        return _serve(site, sim.clock, args, truth=sim.physics)
 
 
-def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
+def _serve(
+    site: SiteConfig, clock: Clock, args: argparse.Namespace, truth: Truth | None = None
+) -> int:
     """Lock, safe state, then the daemon; exit 0 after a clean stop, 1 if it cannot start.
 
     The lock comes first, so that a second ``reachd`` on the same directories is refused
@@ -149,7 +155,7 @@ def _serve(site: SiteConfig, clock: Clock, args: argparse.Namespace) -> int:
     from reach_receiver.daemon.service import Daemon, Directories
 
     dirs = Directories(site.daemon.runtime_directory(), dirs_state)
-    daemon = Daemon(site, clock, dirs, lock=lock)
+    daemon = Daemon(site, clock, dirs, lock=lock, truth=truth)
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
         del frame

@@ -3,7 +3,10 @@
 When ``reachd`` owns the hardware (its control socket answers in the site's runtime
 directory), ``reach-run schedule.yaml`` checks the schedule locally, sends it with every
 file it includes, prints the job's progress as it comes, and exits with the run's
-outcome (0 completed, 1 otherwise). Ctrl-C detaches: the run goes on in the daemon and
+outcome (0 completed, 1 otherwise). What it prints is what a local run prints: its
+progress on standard error (each step, progress inside long ones, the run's warnings),
+its result on standard output (the checks, the solution, the distance to the noise
+floor, the report), then ``job N completed``. Ctrl-C detaches: the run goes on in the daemon and
 ``reach-run --attach [JOB]`` follows it again. ``--detach`` submits and returns at once.
 
 A daemon that will not talk to this user says so ("refused: not a member of the
@@ -13,15 +16,17 @@ taken for a daemon that is not there.
 
 from __future__ import annotations
 
+import logging
 import signal
 import sys
 import threading
+import time
 from typing import Any
 
 from reach_receiver.daemon.client import DaemonClient
 from reach_receiver.daemon.protocol import Closed, ControlError
+from reach_receiver.run.progress_lines import step_lines, update_line
 from reach_receiver.schedule.steps import Schedule
-from reach_receiver.schedule.timing import hms
 
 from .health import format_health
 
@@ -75,25 +80,47 @@ def follow(client: DaemonClient, job: int | None) -> int:
 
 
 def _print(event: dict[str, Any]) -> None:
+    """One event of a followed job, printed as a local run prints the same moment.
+
+    Progress goes to standard error in the lines of a local run's plain display, the
+    run's log lines through this command's own logging (so ``-v`` shows what it shows
+    locally), and the result of a completed run to standard output, as ``reach-run``
+    prints it after a local run.
+    """
     kind = event["kind"]
     if kind == "started":
-        print(f"run directory: {event['run']}", file=sys.stderr, flush=True)
+        _err([f"run directory: {event['run']}"])
     elif kind == "step":
-        left = f", about {hms(event['left_s'])} left" if event.get("left_s") is not None else ""
-        print(
-            f"[{event['index']:>3}/{event['total']}]{left} | {event['text']}  ({event['where']})",
-            file=sys.stderr,
-            flush=True,
-        )
-    elif kind == "log" and event["level"] in ("WARNING", "ERROR", "CRITICAL"):
-        print(f"  {event['level'].lower()}: {event['message']}", file=sys.stderr, flush=True)
+        _err(step_lines(
+            event["index"], event["total"], event["text"], event["where"],
+            event.get("elapsed_s"), event.get("left_s"), event.get("real_s"),
+        ))
+    elif kind == "progress":
+        _err(update_line(event["text"], event["done"], event["total"], event.get("left_s")))
+    elif kind == "log":
+        record = logging.makeLogRecord({
+            "name": event["logger"], "levelname": event["level"],
+            "levelno": logging.getLevelName(event["level"]), "msg": event["message"],
+            "created": event.get("created", event.get("time", time.time())),
+        })
+        logging.getLogger(record.name).handle(record)
     elif kind == "end":
-        reason = f": {event['reason']}" if event.get("reason") else ""
-        print(f"job {event.get('job')} {event['state']}{reason}")
-        if event.get("run"):
-            print(f"run directory: {event['run']}")
-        if event.get("report"):
+        job, state = event.get("job"), event["state"]
+        if state != "completed":
+            reason = f": {event['reason']}" if event.get("reason") else ""
+            _err([f"reach-run: job {job} {state}{reason}"])
+            if event.get("run"):
+                _err([f"reach-run: its run directory: {event['run']}"])
+            return
+        for line in event.get("result") or []:
+            print(line)
+        if not event.get("result") and event.get("report"):  # a daemon of an older version
             print(f"report: {event['report']}")
+        print(f"job {job} completed", flush=True)
+
+
+def _err(lines: list[str]) -> None:
+    print("\n".join(lines), file=sys.stderr, flush=True)
 
 
 def steer(client: DaemonClient, op: str, **fields: Any) -> int:

@@ -24,6 +24,7 @@ from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.monitor import Monitor
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
+from reach_receiver.run.summary import Truth
 from reach_receiver.schedule.kinds import KindRegistry
 
 from .control import ControlServer
@@ -77,6 +78,8 @@ class DaemonBase:
     paused: bool
     current: Job | None
     session: RunSession | None
+    #: The simulator's truth (``reachd --sim``), for the result's lines (run.summary).
+    truth: Truth | None
     progress: HubProgress | None
     _worker: threading.Thread | None
     #: Set by the worker thread when its run ended; read by the main loop.

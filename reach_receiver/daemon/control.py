@@ -39,6 +39,9 @@ from .protocol import ControlError, check_request, closing, decode, encode, refu
 
 log = logging.getLogger(__name__)
 
+#: Requests that change nothing, logged at DEBUG (a script may poll them); the others at INFO.
+READS = frozenset({"status", "queue", "follow", "solutions"})
+
 SOCKET_FILE = "control.sock"
 SOCKET_MODE = 0o660
 #: The listen backlog at least (the kernel's own maximum when larger).
@@ -196,10 +199,12 @@ class ControlServer:
             connection.send(encode(closing(str(err), "protocol")))
             return False
         op = str(request.get("op"))[:40]
-        log.info("control: %s from uid %d (%s, pid %d)", op, peer.uid, peer.user, peer.pid)
+        level = logging.DEBUG if op in READS else logging.INFO  # polling floods no journal
+        log.log(level, "control: %s from uid %d (%s, pid %d)", op, peer.uid, peer.user, peer.pid)
         try:
             answer = self.dispatch(check_request(request), peer)
         except ControlError as err:
+            log.log(level, "control: %s from uid %d refused: %s", op, peer.uid, err)
             answer = refusal(str(err), err.problems)
         except Exception as err:
             log.exception("control: %s failed", op)

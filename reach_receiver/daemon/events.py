@@ -5,6 +5,12 @@ socket's ``follow``) first receives what happened so far, then every new event a
 comes, until the job's ``end`` event. :class:`HubProgress` is the run layer's
 :class:`~reach_receiver.run.context.Progress` that feeds it, and :class:`HubLog` the
 logging handler that adds the receiver's log lines while a job runs.
+
+A follower prints the events as a local run prints its progress
+(:mod:`reach_receiver.run.progress_lines`), so a step's event carries the run's clock
+and real seconds, and progress inside a step is kept at the lines a local run shows
+(a tenth of the step, at most one a real second): a long step neither floods a
+follower over a slow link nor pushes the job's first events out of the kept ones.
 """
 
 from __future__ import annotations
@@ -16,6 +22,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from reach_receiver.clock import Clock
+from reach_receiver.run.progress_lines import Throttle, real_seconds
 from reach_receiver.schedule.steps import Step
 
 #: Events kept per job for followers who attach late.
@@ -71,15 +79,20 @@ class HubProgress:
         self,
         hub: EventHub,
         job: int,
+        clock: Clock,
         on_step: Callable[[Step], None] | None = None,
         on_started: Callable[[Path], None] | None = None,
     ) -> None:
         self.hub = hub
         self.job = job
+        self.clock = clock
         self.on_step = on_step
         self.on_started = on_started
         self.step_text = ""
         self.left_s: float | None = None
+        self.start = clock.now()
+        self.real_start = time.monotonic()
+        self._throttle = Throttle()
 
     def started(self, directory: Path) -> None:
         """The run's directory."""
@@ -90,16 +103,21 @@ class HubProgress:
     def step(self, index: int, total: int, step: Step, text: str, left_s: float | None) -> None:
         """A top-level step begins."""
         self.step_text, self.left_s = text, left_s
+        self._throttle.new_step()
         self.hub.publish(
             self.job, "step", index=index, total=total, text=text, where=str(step.where),
-            left_s=left_s,
+            left_s=left_s, elapsed_s=self.clock.now() - self.start,
+            real_s=real_seconds(self.clock, time.monotonic() - self.real_start),
         )
         if self.on_step is not None:
             self.on_step(step)
 
     def update(self, text: str, done: int, total: int, left_s: float | None) -> None:
-        """Progress inside the step."""
-        self.hub.publish(self.job, "progress", text=text, done=done, total=total, left_s=left_s)
+        """Progress inside the step, as often as a local run shows it."""
+        if self._throttle.due(done, total, time.monotonic()):
+            self.hub.publish(
+                self.job, "progress", text=text, done=done, total=total, left_s=left_s
+            )
 
 
 class HubLog(logging.Handler):
@@ -115,7 +133,7 @@ class HubLog(logging.Handler):
         try:
             self.hub.publish(
                 self.job, "log", level=record.levelname, logger=record.name,
-                message=record.getMessage(),
+                message=record.getMessage(), created=record.created,
             )
         except Exception:  # a logging handler never raises
             self.handleError(record)

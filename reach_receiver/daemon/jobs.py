@@ -42,7 +42,8 @@ class Job:
 
     ``resumes`` lists the run files of earlier, interrupted runs of the same schedule that
     this job continues (oldest first); ``report`` is the directory of the calibration's
-    report its run left (:mod:`reach_receiver.run.report`), if any.
+    report its run left (:mod:`reach_receiver.run.report`), if any; ``result`` what a
+    completed run printed (:mod:`reach_receiver.run.summary`).
     """
 
     id: int
@@ -58,11 +59,14 @@ class Job:
     reason: str = ""
     resumes: list[str] = field(default_factory=list)
     report: str | None = None
+    #: A completed run's result as ``reach-run`` prints it (run.summary), for a follower
+    #: who attaches after the end.
+    result: list[str] = field(default_factory=list)
 
     def public(self) -> dict[str, Any]:
-        """The job as the control protocol shows it (without the schedule's texts)."""
+        """The job as the control protocol shows it (without the schedule's texts and result)."""
         out = asdict(self)
-        del out["files"]
+        del out["files"], out["result"]
         return out
 
 

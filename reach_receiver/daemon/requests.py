@@ -95,24 +95,41 @@ class ControlRequests(JobRunning):
         if job is None:
             raise ControlError(f"no job {job_id}")
         if job.state == "queued":
+            log.info("job %d cancelled by uid %d before it ran", job.id, peer.uid)
             return self.queue.update(job, state="cancelled", ended=time.time(),
                                      reason=f"cancelled by uid {peer.uid} before it ran")
         if job.state == "running" and self.session is not None and self.current is job:
+            log.info("job %d cancelled by uid %d: stopping it", job.id, peer.uid)
             self.queue.update(job, state="cancelled")
             self.session.stop(f"cancelled by uid {peer.uid}")
             return job
         raise ControlError(f"job {job_id} is {job.state}: nothing to cancel")
 
     def _abort(self, peer: Peer) -> dict[str, Any] | None:
+        """Stop the running job now and pause the queue; idle, pause and go safe.
+
+        A run past its last step (closing its run file, drawing its report) has nothing
+        left to stop: the abort is refused with that said, and changes nothing.
+        """
+        session, job = self.session, self.current
+        if session is not None and job is not None:
+            if session.closing:
+                raise ControlError(
+                    f"job {job.id} has run all its steps and is closing (its run file, its "
+                    "report): nothing to abort; the queue was not paused"
+                )
+            self.paused = True
+            session.stop(f"aborted by uid {peer.uid}")
+            log.info("job %d aborted by uid %d; the queue is paused", job.id, peer.uid)
+            return job.public()
         self.paused = True
-        if self.session is not None and self.current is not None:
-            self.session.stop(f"aborted by uid {peer.uid}")
-            return self.current.public()
         with self._loop:
             self._go_safe()
+        log.info("abort by uid %d: the queue is paused, the front-end safe", peer.uid)
         return None
 
     def _resume(self, peer: Peer) -> bool:
+        log.info("queue resumed by uid %d", peer.uid)
         with self._loop:
             self.paused = False
             # The operator has seen them: a failed run, and what the start found (a state
@@ -135,9 +152,10 @@ class ControlRequests(JobRunning):
         if job is None:
             raise ControlError(f"no job {job_id}")
         if job.state not in ("queued", "running") and not self.hub.ended(job.id):
-            return iter([reply(end=True, event={"kind": "end", "state": job.state,
-                                                "reason": job.reason, "run": job.run,
-                                                "report": job.report})])
+            return iter([reply(end=True, event={"kind": "end", "job": job.id,
+                                                "state": job.state, "reason": job.reason,
+                                                "run": job.run, "report": job.report,
+                                                "result": job.result})])
         events = self.hub.follow(job.id, self._halt)
         return (reply(event=e, end=e["kind"] == "end") for e in events)
 

@@ -6,7 +6,10 @@ layer's :class:`~reach_receiver.run.session.RunSession` in a worker thread, its
 progress and log lines to the job's followers (:mod:`.events`); the main loop then
 records how it ended (:meth:`JobRunning._collect`): the job's state, its run directory
 and the calibration's report if the run drew one, and the daemon's next state
-(``idle``, or ``faulted`` with an alarm). The timers' schedules become jobs the same way.
+(``idle``, or ``faulted`` with an alarm). Its start and its end (with the outcome and
+the reason) are logged at INFO, a failure at WARNING; the end's event carries the run's
+result as ``reach-run`` prints it (:mod:`reach_receiver.run.summary`). The timers'
+schedules become jobs the same way.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from reach_receiver.errors import ConnectionLost, DeviceTimeout, ReceiverError
 from reach_receiver.run.resume import resumed_schedule
 from reach_receiver.run.session import RunFailed, RunSession, RunSummary
 from reach_receiver.run.steps import Observe
+from reach_receiver.run.summary import report_line
 from reach_receiver.schedule.compile import ScheduleError, compile_text
 from reach_receiver.schedule.steps import Schedule, Step
 from reach_receiver.store import RUN_FILE
@@ -44,6 +48,14 @@ def schedule_reader(files: dict[str, str]) -> Any:
             raise FileNotFoundError(2, "not sent with the schedule", str(path)) from None
 
     return read
+
+
+def _result(summary: RunSummary | None) -> list[str]:
+    """A completed run's result as ``reach-run`` prints it, the report's line last."""
+    if summary is None:
+        return []
+    line = report_line(summary)
+    return [*summary.lines, *([line] if line else [])]
 
 
 class JobRunning(FaultHandling):
@@ -75,22 +87,26 @@ class JobRunning(FaultHandling):
         except (ControlError, ReceiverError, OSError) as err:
             problems = "; ".join(getattr(err, "problems", []))
             self.queue.update(job, state="failed", ended=time.time(), reason=f"{err} {problems}")
+            log.warning("job %d %s failed before it started: %s", job.id, job.name, job.reason)
             self.hub.publish(job.id, "end", state="failed", reason=job.reason, run=None)
             return
         def started(directory: Path) -> None:
             self.queue.update(job, run=str(directory))
 
         self.progress = HubProgress(
-            self.hub, job.id, on_step=self._step_started, on_started=started
+            self.hub, job.id, self.clock, on_step=self._step_started, on_started=started
         )
         self.monitor.hand_over()
         session = RunSession(
             schedule, self.site, self.clock, self.dirs.runs, progress=self.progress,
             metadata={"job": job.id, "origin": job.origin, "resumes": job.resumes},
             carry_from=Path(job.resumes[-1]) if job.resumes else None, monitor=self.monitor,
+            truth=self.truth,
         )
         self.current, self.session = job, session
         self.queue.update(job, state="running", started=time.time())
+        log.info("job %d %s started: %s, %d steps (%s)", job.id, job.name, job.schedule,
+                 len(schedule.steps), job.origin)
         self.machine.go("running", f"job {job.id} {job.name} ({job.origin})")
         self._worker = threading.Thread(
             target=self._work, args=(job, session), name=f"job-{job.id}", daemon=True
@@ -121,6 +137,7 @@ class JobRunning(FaultHandling):
         job, failure, summary = self._finished
         self._finished = None
         run = str(self.session.directory) if self.session and self.session.directory else None
+        token = self.session.token if self.session else None
         self.current, self.session, self.progress, self._worker = None, None, None, None
         self.monitor.run_ended()
         state = "completed" if failure is None else failure.status
@@ -128,11 +145,17 @@ class JobRunning(FaultHandling):
             state = "cancelled"
         reason = "" if failure is None else str(failure)
         report = str(summary.report) if summary is not None and summary.report else None
-        if report is not None:
-            log.info("job %d: report in %s", job.id, report)
+        result = _result(summary)
         self.queue.update(job, state=state, ended=time.time(), run=run, reason=reason,
-                          report=report)
-        self.hub.publish(job.id, "end", state=state, reason=reason, run=run, report=report)
+                          report=report, result=result)
+        log.log(logging.INFO if state != "failed" else logging.WARNING, "job %d %s %s%s%s",
+                job.id, job.name, state, f": {reason}" if reason else "",
+                f"; report in {report}" if report else "")
+        if state == "completed" and token is not None and token.requested:
+            log.info("job %d had run all its steps when asked to stop (%s)", job.id,
+                     token.reason)
+        self.hub.publish(job.id, "end", state=state, reason=reason, run=run, report=report,
+                         result=result)
         if self.machine.state == "stopping":
             # The daemon itself is stopping (SIGTERM, SIGHUP: a restart, a reboot): the
             # schedule goes on after it, from where the run stopped, if the site says so.

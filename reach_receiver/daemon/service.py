@@ -37,6 +37,7 @@ from reach_receiver.clock import Clock, StopEvent
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.monitor import Monitor
 from reach_receiver.run.steps import STANDARD_KINDS
+from reach_receiver.run.summary import Truth
 from reach_receiver.schedule.kinds import KindRegistry
 from reach_receiver.schedule.lst import apparent_lst_h
 
@@ -77,6 +78,9 @@ class Daemon(ControlRequests):
         Real seconds between turns of the main loop.
     lock
         The hardware lock, if the caller took it (``reachd`` does, before anything else).
+    truth
+        The simulator's truth (``reachd --sim``): a run's result then says how far its
+        calibration is from it, as ``reach-run --sim`` does.
     """
 
     def __init__(
@@ -89,6 +93,7 @@ class Daemon(ControlRequests):
         notifier: Notifier | None = None,
         tick_s: float = 0.5,
         lock: HardwareLock | None = None,
+        truth: Truth | None = None,
     ) -> None:
         self.site = site
         self.clock = clock
@@ -116,6 +121,7 @@ class Daemon(ControlRequests):
         self.paused = False
         self.current = None
         self.session = None
+        self.truth = truth
         self.progress = None
         self._worker = None
         self._finished = None

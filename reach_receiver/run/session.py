@@ -17,10 +17,13 @@ the store refuses the measurement by name (:class:`~reach_receiver.store.DiskFul
 while it still has room for the records that close the run; a merged run file that
 does not fit leaves the part files as they are, and the reason says where they are.
 
-A completed run that made a calibration then gets its report, figures and summary, in
-``<run dir>/report/`` (:mod:`.report`; ``report=False`` skips it), so that ``reach-run``
-and the daemon's jobs both leave one. A report that cannot be drawn is logged and
-leaves ``RunSummary.report`` empty; it never fails the run, whose file is closed.
+A completed run's result (its checks such as the test load's, the solution's orders,
+noise scale and distance to the noise floor: :mod:`.summary`) goes to ``run.log`` at
+INFO and into :attr:`RunSummary.lines`. A completed run that made a calibration then
+gets its report, figures and summary, in ``<run dir>/report/`` (:mod:`.report`;
+``report=False`` skips it), so that ``reach-run`` and the daemon's jobs both leave one.
+A report that cannot be drawn is logged and leaves ``RunSummary.report`` empty; it never
+fails the run, whose file is closed.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ from .report import write_run_report
 from .resume import carry
 from .steps import STANDARD_KINDS
 from .steps.calibrate import CalibrationOutcome
+from .summary import Truth, summary_lines
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +96,9 @@ class RunSummary:
     elapsed_s: float
     #: The report's directory (``None``: no calibration, not asked for, or it failed).
     report: Path | None = None
+    #: The result as ``reach-run`` prints it (:func:`.summary.summary_lines`), also in
+    #: ``run.log``.
+    lines: tuple[str, ...] = ()
 
 
 def plan(
@@ -162,6 +169,8 @@ class RunSession:
     monitor: Monitor | None = None
     #: Draw the calibration's report after a completed run that made one.
     report: bool = True
+    #: The simulator's truth, for the result's lines of a simulated run (:mod:`.summary`).
+    truth: Truth | None = None
 
     @classmethod
     def prepare(
@@ -238,7 +247,10 @@ class RunSession:
             if self.monitor is not None:
                 watch(self.monitor, context)
             summary = self._run(context, entries, total_s)
-            return self._with_report(summary)
+            lines = tuple(summary_lines(summary, self.truth))
+            for line in lines:  # the result first: the report takes a while
+                log.info("%s", line)
+            return self._with_report(replace(summary, lines=lines))
 
     def _open(self, store: RunStore) -> None:
         """Open the run file and carry the measurements over; RunFailed if it cannot be.
