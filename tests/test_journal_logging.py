@@ -9,6 +9,7 @@ that ``journalctl -u reachd -p info`` tells the story and ``-p warning`` leaves 
 """
 
 import os
+import pty
 import re
 import signal
 import subprocess
@@ -174,3 +175,38 @@ def test_a_journal_stream_that_is_not_standard_error_changes_nothing(tmp_path):
     assert re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} reach_receiver.probe: a warning line",
                     lines[0]), lines
     assert "printed" in lines
+
+
+WIDE = """\
+import logging
+from reach_receiver.cli.logs import configure_logging
+configure_logging(False)
+logging.getLogger("reach_receiver.monitor.access").warning(
+    "monitor: spectrometer does not answer: spectrometer: no datagram for 66 s, and a few "
+    "more words to go well past the edge of an eighty-column terminal")
+"""
+
+
+def test_on_a_terminal_a_long_log_line_is_wrapped_within_80_columns(tmp_path):
+    main, child = pty.openpty()
+    env = {k: v for k, v in os.environ.items() if k != "JOURNAL_STREAM"}
+    process = subprocess.Popen([sys.executable, "-c", WIDE], stderr=child, env=env)
+    os.close(child)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(main, 4096)
+        except OSError:  # EIO: the child closed the terminal
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(main)
+    assert process.wait(timeout=30) == 0
+    lines = b"".join(chunks).decode().replace("\r\n", "\n").splitlines()
+    assert len(lines) >= 3, lines
+    assert all(len(line) <= 80 for line in lines), lines
+    assert re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} reach_receiver.monitor.access: ",
+                    lines[0]), lines
+    assert all(line.startswith("    ") for line in lines[1:]), lines
+    assert " ".join(x.strip() for x in lines).endswith("edge of an eighty-column terminal")

@@ -1,14 +1,15 @@
 """Logging and ``--version`` for the command-line tools.
 
 On a terminal (or a pipe, a file) warnings go to standard error with their time, and
-everything from INFO with ``-v``. Under systemd, where standard error is the journal's
-stream, each line starts with its syslog priority instead (``<3>`` error, ``<4>``
-warning, ``<6>`` info, ``<7>`` debug: sd-daemon(3)) and carries no time of its own (the
-journal stamps it), so that ``journalctl -u reachd -p warning`` shows the warnings and
-errors alone; INFO is the default there (the service's state changes, its jobs, who
-asked for what), DEBUG with ``-v``. Lines printed outside the log there get a priority
-too: ``<6>`` on standard output, ``<3>`` on standard error (what a command writes there
-outside its log is what went wrong).
+everything from INFO with ``-v``; on a terminal a line wider than 80 columns is
+wrapped. Under systemd, where standard error is the journal's stream, each line starts
+with its syslog priority instead (``<3>`` error, ``<4>`` warning, ``<6>`` info, ``<7>``
+debug: sd-daemon(3)) and carries no time of its own (the journal stamps it), so that
+``journalctl -u reachd -p warning`` shows the warnings and errors alone; INFO is the
+default there (the service's state changes, its jobs, who asked for what), DEBUG with
+``-v``. Lines printed outside the log there get a priority too: ``<6>`` on standard
+output, ``<3>`` on standard error (what a command writes there outside its log is what
+went wrong).
 
 The receiver's and the engine's loggers pass INFO on whatever the stream shows, so that
 a run's own log file (``run.log``) holds the whole story.
@@ -20,12 +21,15 @@ import argparse
 import logging
 import os
 import sys
+import textwrap
 from importlib import metadata
 from typing import Any, TextIO
 
 STDERR_FORMAT = "%(asctime)s %(name)s: %(message)s"
 JOURNAL_FORMAT = "%(name)s: %(message)s"
 _HANDLER_NAME = "reach-stderr"
+#: The width of an operator's terminal (wrapped log lines on a terminal).
+WIDTH = 80
 
 #: Syslog priorities of the logging levels (sd-daemon(3)).
 PRIORITIES = {
@@ -90,6 +94,40 @@ class JournalFormatter(logging.Formatter):
         return "\n".join(prefix + line for line in super().format(record).splitlines())
 
 
+class TerminalFormatter(logging.Formatter):
+    """Each record with its time and logger; on a terminal, within :data:`WIDTH` columns.
+
+    An operator over a slow link reads in an 80-column terminal, where a longer line
+    would break anywhere: it is wrapped between words instead, the rest indented. In a
+    pipe or a file a record stays one line, for ``grep``.
+    """
+
+    def __init__(self, wrap: bool) -> None:
+        super().__init__(STDERR_FORMAT)
+        self.wrap = wrap
+
+    def format(self, record: logging.LogRecord) -> str:
+        """The record, wrapped on a terminal."""
+        text = super().format(record)
+        if not self.wrap:
+            return text
+        return "\n".join(
+            wrapped
+            for line in text.splitlines()
+            for wrapped in textwrap.wrap(
+                line, WIDTH, subsequent_indent="    ", break_long_words=False,
+                break_on_hyphens=False,
+            ) or [line]
+        )
+
+
+def _isatty(stream: TextIO) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # no such method, or closed
+        return False
+
+
 class PrefixedLines:
     """A text stream whose every line starts with a syslog priority.
 
@@ -140,7 +178,7 @@ def configure_logging(verbose: bool) -> None:
         handler.setFormatter(JournalFormatter())
     else:
         handler.setLevel(logging.INFO if verbose else logging.WARNING)
-        handler.setFormatter(logging.Formatter(STDERR_FORMAT))
+        handler.setFormatter(TerminalFormatter(_isatty(sys.stderr)))
     root.addHandler(handler)
     for name in ("reach_receiver", "calibration"):
         logging.getLogger(name).setLevel(logging.DEBUG if journal and verbose else logging.INFO)

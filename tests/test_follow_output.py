@@ -1,0 +1,133 @@
+"""A job followed through ``reachd`` prints what a local ``reach-run`` prints.
+
+The same calibrating schedule and seed run twice at once: locally (``reach-run --sim``)
+and submitted to a ``reachd --sim`` and followed (``reach-run --site``). Both are real
+processes of the real commands. Their numbers differ (the simulated iTPM skips spectra
+when the machine is busy, so the data differ), so the lines are compared by shape,
+every number a ``#`` and the run directory ``<run>``: the same result lines in the same
+order on standard output, the same step lines on standard error, every progress line
+within 80 columns. While the followed job draws its report, an abort is refused as
+coming too late, and the queue is not left paused.
+"""
+
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from reach_receiver.daemon.client import DaemonClient
+from reach_receiver.daemon.protocol import ControlError
+
+ENTRY = "from reach_receiver.cli import {main}; import sys; sys.exit({main}(sys.argv[1:]))"
+SCHEDULE = """\
+schedule: follow
+steps:
+  - initialise: {}
+  - vna_calibrate: {}
+  - test_load_check: {}
+  - s11: {targets: [cold, hot, c10open, c10short, ant, lna]}
+  - dicke: {sources: [cold, hot, c10open, c10short], seconds: 60}
+  - dicke: {sources: [ant], seconds: 60}
+  - calibrate: {}
+  - safe: {}
+"""
+
+
+def python(main: str, *args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-c", ENTRY.format(main=main), *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+
+
+def shape(line: str, run: str) -> str:
+    """A line with its run directory ``<run>`` and every number ``#``."""
+    return re.sub(r"\d+(\.\d+)?", "#", line.replace(run, "<run>"))
+
+
+def run_directory(err: str) -> str:
+    (line,) = [x for x in err.splitlines() if x.startswith("run directory: ")]
+    return line.removeprefix("run directory: ")
+
+
+def until(predicate, timeout_s: float = 120.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        found = predicate()
+        if found:
+            return found
+        time.sleep(0.05)
+    raise AssertionError("timed out")
+
+
+@pytest.fixture
+def reachd(tmp_path):
+    process = python("reachd_main", "--sim", "--seed", "0", "--state-dir", str(tmp_path / "state"),
+                     "--runtime-dir", str(tmp_path / "run"), "--site-out",
+                     str(tmp_path / "site.yaml"))
+    until(lambda: (tmp_path / "run" / "control.sock").exists() or process.poll() is not None)
+    assert process.poll() is None, process.communicate()
+    yield tmp_path / "site.yaml"
+    process.terminate()
+    process.communicate(timeout=60)
+
+
+def abort_while_the_report_is_drawn(socket: Path) -> None:
+    """Once the run file is merged (the steps are over), an abort has nothing to stop."""
+    with DaemonClient(socket) as client:
+        run = until(lambda: next(
+            (j["run"] for j in client.request("queue")["jobs"] if j["id"] == 1 and j["run"]),
+            None))
+        until(lambda: (Path(run) / "run.h5").exists())
+        with pytest.raises(ControlError, match=r"job 1 has run all its steps .* nothing to abort"):
+            client.request("abort")
+        assert client.request("status")["paused"] is False
+
+
+def test_a_followed_job_prints_the_local_run_s_lines(reachd, tmp_path):
+    schedule = tmp_path / "follow.yaml"
+    schedule.write_text(SCHEDULE)
+    local = python("run_main", "--sim", "--seed", "0", "--no-report", "--out",
+                   str(tmp_path / "local"), str(schedule))
+    followed = python("run_main", "--site", str(reachd), str(schedule))
+    abort_while_the_report_is_drawn(tmp_path / "run" / "control.sock")
+    local_out, local_err = local.communicate(timeout=300)
+    assert local.returncode == 0, local_err
+    out, err = followed.communicate(timeout=300)
+    assert followed.returncode == 0, err
+
+    local_run, run = run_directory(local_err), run_directory(err)
+    assert run.startswith(str(tmp_path / "state" / "runs"))
+    mine = local_out.splitlines()
+    theirs = out.splitlines()
+    # The schedule's line, then (followed) the job, the same result, its report, its end.
+    assert theirs[0] == mine[0]
+    assert theirs[1] == "submitted to reachd: job 1 (follow)"
+    assert theirs[-2:] == [f"report: {run}/report", "job 1 completed"]
+    result = theirs[2:-2]
+    assert [shape(x, run) for x in result] == [shape(x, local_run) for x in mine[1:]]
+    for expected in ("check test load: PASS", "solution: orders (#, #, #, #, #)",
+                     "  noise scale s^# #", "distance to floor #",
+                     "actual calibration error against the simulator's truth"):
+        assert any(expected in shape(x, run) for x in result), (expected, out)
+
+    # Standard error: the step lines alike, progress inside the steps, 80 columns.
+    def steps(text: str, directory: str) -> list[str]:
+        lines = text.splitlines()
+        return [shape(x + " / " + lines[i + 1], directory)
+                for i, x in enumerate(lines) if re.match(r"\[ *\d+/\d+\] ", x)]
+
+    assert steps(err, run) == steps(local_err, local_run)
+    assert len(steps(err, run)) == 8
+    assert re.search(r"^ +Dicke cold \(1/4\): \w+: \d+/\d+, \d:\d\d:\d\d left in the step$",
+                     err, re.M), err
+    assert not re.search(r"\],", err)  # no stray comma where a time was missing
+    # The progress lines (the daemon's log records keep a line each in a pipe: on a
+    # terminal they are wrapped, test_journal_logging; a path is as long as it is).
+    progress = [x for x in err.splitlines() if x.startswith(("[", " "))]
+    assert len(progress) > 16
+    wide = [x for x in progress if len(x) > 80]
+    assert not wide, wide
