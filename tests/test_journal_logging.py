@@ -117,6 +117,12 @@ def test_every_line_has_a_priority_and_the_story_is_at_info(tmp_path):
     ):
         assert re.search(expected, text), (expected, text)
     assert "control: status from" not in text  # a poll is no story
+    # The monitor's alarms, if any came and went: raised a warning, cleared at INFO.
+    for line in lines:
+        if "alarm raised" in line:
+            assert line.startswith("<4>"), line
+        if "alarm cleared" in line:
+            assert line.startswith("<6>"), line
     # The same result in the run's own log.
     (run_log,) = (tmp_path / "state" / "runs").glob("*/run.log")
     assert re.search(r"INFO .*solution: orders \(", run_log.read_text())
