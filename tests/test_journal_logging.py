@@ -106,6 +106,8 @@ def test_every_line_has_a_priority_and_the_story_is_at_info(tmp_path):
         r"control: submit from uid \d+",
         r"job 1 journal started: .*journal\.yaml, 8 steps",
         r"state idle -> running: job 1 journal",
+        r"journal\.yaml:\d+: calibrated: orders \(.*\), noise scale s\^2 [\d.]+, distance to "
+        r"floor [\d.]+ on 'ant'",
         r"check test load: PASS",
         r"solution: orders \(\d+, \d+, \d+, \d+, \d+\)",
         r"noise scale s\^2 \d+\.\d+",

@@ -27,6 +27,7 @@ for 12 calibrators x 6554 channels); the run summary states it beside the floor.
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,9 +38,17 @@ from numpy.typing import NDArray
 from calibration import CalibrationData
 from calibration.data import SourceData
 from calibration.errors import FileFormatError, IllPosedError
+from calibration.per_frequency import ChannelSolution
 from calibration.reflection_noise import reflection_variance
 from calibration.solution_file import read_solution
-from calibration.solvers import METHODS, AnySolution, refit, solution_noise_floor, solver
+from calibration.solvers import (
+    METHODS,
+    AnySolution,
+    method_name,
+    refit,
+    solution_noise_floor,
+    solver,
+)
 from calibration.vna_systematics import ReflectionSystematics, reflection_systematics
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
@@ -54,6 +63,8 @@ from ..context import CheckFailed, RunContext
 from ..kind import RunnableKind
 
 FloatArray = NDArray[np.float64]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -110,6 +121,18 @@ class CalibrationOutcome:
         if self.systematics is None:
             return None
         return float(np.sqrt(np.mean(self.systematics.std_k(self.validation.name) ** 2)))
+
+
+def result_line(outcome: CalibrationOutcome) -> str:
+    """The calibration in one line for the log: orders, noise scale, distance to floor."""
+    solution = outcome.solution
+    if isinstance(solution, ChannelSolution):
+        model = f"{method_name(solution)} per channel"
+    else:
+        model = (f"orders {solution.best_orders}, noise scale s^2 "
+                 f"{solution.posterior.noise_variance:.3f}")
+    return (f"calibrated: {model}, distance to floor {outcome.predicted_k / outcome.floor_k:.3f}"
+            f" on {outcome.validation.name!r} (floor {1e3 * outcome.floor_k:.3f} mK)")
 
 
 def benchmark_solution(path: Path) -> AnySolution:
@@ -270,3 +293,4 @@ class CalibrateKind(RunnableKind[Calibrate]):
         )
         run.solution = outcome.solution
         run.calibration = outcome
+        log.info("%s: %s", step.where, result_line(outcome))
