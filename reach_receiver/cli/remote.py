@@ -98,9 +98,11 @@ def _print(event: dict[str, Any]) -> None:
     elif kind == "progress":
         _err(update_line(event["text"], event["done"], event["total"], event.get("left_s")))
     elif kind == "log":
+        level = logging.getLevelName(event["level"])  # a number for a level's name
         record = logging.makeLogRecord({
             "name": event["logger"], "levelname": event["level"],
-            "levelno": logging.getLevelName(event["level"]), "msg": event["message"],
+            "levelno": level if isinstance(level, int) else logging.WARNING,
+            "msg": event["message"],
             "created": event.get("created", event.get("time", time.time())),
         })
         logging.getLogger(record.name).handle(record)
@@ -114,7 +116,7 @@ def _print(event: dict[str, Any]) -> None:
             return
         for line in event.get("result") or []:
             print(line)
-        if not event.get("result") and event.get("report"):  # a daemon of an older version
+        if not event.get("result") and event.get("report"):  # a job recorded without its result
             print(f"report: {event['report']}")
         print(f"job {job} completed", flush=True)
 
