@@ -17,9 +17,14 @@ import time
 from pathlib import Path
 
 import pytest
+from sites import planning_site
 
+from reach_receiver.clock import ManualClock
 from reach_receiver.daemon.client import DaemonClient
 from reach_receiver.daemon.protocol import ControlError
+from reach_receiver.run import compile_text
+from reach_receiver.run.progress_lines import Throttle, update_line
+from reach_receiver.run.session import RunSession
 
 ENTRY = "from reach_receiver.cli import {main}; import sys; sys.exit({main}(sys.argv[1:]))"
 SCHEDULE = """\
@@ -131,3 +136,47 @@ def test_a_followed_job_prints_the_local_run_s_lines(reachd, tmp_path):
     assert len(progress) > 16
     wide = [x for x in progress if len(x) > 80]
     assert not wide, wide
+
+
+class Updates:
+    """A run's progress as it comes: the updates inside its steps."""
+
+    def __init__(self) -> None:
+        self.updates: list[tuple[str, int, int, float | None]] = []
+
+    def started(self, directory: Path) -> None:
+        pass
+
+    def step(self, index, total, step, text, left_s) -> None:
+        pass
+
+    def update(self, text: str, done: int, total: int, left_s: float | None) -> None:
+        self.updates.append((text, done, total, left_s))
+
+
+def test_a_long_wait_reports_its_progress_in_tenths(tmp_path):
+    site = planning_site()
+    schedule = compile_text("schedule: w\nsteps:\n  - wait: {seconds: 3600}\n", "w.yaml",
+                            site=site)
+    updates = Updates()
+    RunSession(schedule, site, ManualClock(1.8e9), tmp_path, progress=updates).run()
+    assert [(done, total) for _, done, total, _ in updates.updates] == [
+        (360 * k, 3600) for k in range(11)]
+    assert [left for *_, left in updates.updates] == [3600.0 - 360 * k for k in range(11)]
+    assert update_line(*updates.updates[3]) == ["         wait 1:00:00: 1080/3600, 0:42:00 left "
+                                                "in the step"]
+
+
+def test_progress_is_shown_at_each_tenth_at_most_once_a_second():
+    def shown(seconds_per_unit: float) -> list[int]:
+        throttle = Throttle()
+        return [done for done in range(101) if throttle.due(done, 100, done * seconds_per_unit)]
+
+    assert shown(0.25) == list(range(0, 101, 10))  # a tenth further each time
+    assert shown(0.0625) == [*range(0, 100, 16), 100]  # a real second later; the end always
+    throttle = Throttle()
+    assert throttle.due(5, 100, 0.0)
+    assert not throttle.due(50, 100, 0.5)
+    throttle.new_step()
+    assert not throttle.due(0, 100, 0.5)  # a new step's first update, a second later
+    assert throttle.due(0, 100, 1.0)

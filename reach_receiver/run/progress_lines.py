@@ -91,7 +91,8 @@ class Throttle:
         """Whether to show ``done`` of ``total`` at (real) time ``now``; noted if so."""
         fraction = done / total if total else 1.0
         if done < total and (
-            fraction - self._last_fraction < self.fraction or now - self._last_time < self.seconds
+            fraction - self._last_fraction < self.fraction - 1e-9
+            or now - self._last_time < self.seconds - 1e-9
         ):
             return False
         self._last_fraction, self._last_time = fraction, now

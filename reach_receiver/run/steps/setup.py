@@ -470,5 +470,11 @@ class WaitKind(RunnableKind[Wait]):
             target = lst.timestamp()
         else:
             return
-        run.progress.update(self.describe(step), 0, 1, max(0.0, target - now))
-        run.wait(target - now)
+        # In tenths, each reported: a wait of hours shows that it is moving.
+        total, text = max(0.0, target - now), self.describe(step)
+        while True:
+            left = max(0.0, target - run.clock.now())
+            run.progress.update(text, round(total - left), max(1, round(total)), left)
+            if left <= 0:
+                return
+            run.wait(min(left, total / 10))
