@@ -29,12 +29,30 @@ INDENT = " " * 9
 
 
 def fit(line: str, indent: str = INDENT) -> list[str]:
-    """``line`` in lines of at most :data:`WIDTH` columns, the later ones indented."""
+    """``line`` in lines of at most :data:`WIDTH` columns, the later ones indented.
+
+    Broken between words only: a word longer than a line (a path) keeps its line.
+    """
     if len(line) <= WIDTH:
         return [line]
     return textwrap.wrap(
-        line, WIDTH, subsequent_indent=indent, break_on_hyphens=False
-    ) or [line[:WIDTH]]
+        line, WIDTH, subsequent_indent=indent, break_on_hyphens=False, break_long_words=False
+    ) or [line]
+
+
+def pack(chunks: list[str], indent: str = "    ") -> list[str]:
+    """``chunks`` joined by spaces within :data:`WIDTH` columns, never broken inside one.
+
+    For lines whose parts belong together (a number and its unit, a parenthesis): a
+    chunk that does not fit on the line begins the next one, indented.
+    """
+    lines: list[str] = []
+    for chunk in chunks:
+        if lines and len(lines[-1]) + 1 + len(chunk) <= WIDTH:
+            lines[-1] += " " + chunk
+        else:
+            lines.append(indent + chunk if lines else chunk)
+    return lines
 
 
 def real_seconds(clock: Clock, real_s: float) -> float | None:

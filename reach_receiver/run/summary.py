@@ -3,9 +3,14 @@
 ``reach-run`` prints them, ``run.log`` holds them and the daemon's job end carries them
 to its followers. One function makes them, so that a local run, a job followed through
 ``reachd`` and the run's own log say the same thing in the same words: the run file and
-its duration, each check, and for a run that made a calibration the hand-over, the
-solution (orders, noise scale ``s^2``), the distance to the noise floor on the
-validation source (the test load), and the VNA's systematic when it was asked for.
+its duration, each check (the test load's among them), and for a run that made a
+calibration the hand-over, the solution (orders, noise scale ``s^2``), the distance to
+the noise floor on the validation source (the antenna when it was measured), and the
+VNA's systematic when it was asked for.
+Each line fits in 80 columns (an operator's terminal over the satellite link): a longer
+one continues on the next, indented, broken between its parts (never inside a number
+and its unit, a pair of orders and weight, a parenthesis), so that what reads a line
+for a number still finds it beside its words.
 
 A simulated run also knows the truth: ``truth`` (the simulator's physics, passed by the
 caller, since the run layer does not import the simulators) adds the actual calibration
@@ -28,6 +33,7 @@ from calibration.solvers import AnySolution, NoiseWaveSolution, method_name
 from reach_receiver.schedule.timing import hms
 from reach_receiver.store.corrections import corrections_line
 
+from .progress_lines import fit, pack
 from .steps.calibrate import CalibrationOutcome
 
 if TYPE_CHECKING:
@@ -52,7 +58,8 @@ def summary_lines(summary: RunSummary, truth: Truth | None = None) -> list[str]:
         f"simulated/real time of the run: {hms(summary.elapsed_s)}",
     ]
     for check in summary.checks:
-        lines.append(f"check {check.name}: {'PASS' if check.passed else 'FAIL'} ({check.detail})")
+        verdict = "PASS" if check.passed else "FAIL"
+        lines += fit(f"check {check.name}: {verdict} ({check.detail})", "    ")
     if summary.calibration is not None:
         lines += calibration_lines(summary.calibration, truth)
     return lines
@@ -72,40 +79,41 @@ def calibration_lines(outcome: CalibrationOutcome, truth: Truth | None = None) -
     """The hand-over, the solution and how it fares on the validation source."""
     solution, handover = outcome.solution, outcome.handover
     cycles = sum(len(v) for v in handover.cycles.values())
-    lines = [
-        f"hand-over: {handover.band_hz[0] / 1e6:g}-{handover.band_hz[1] / 1e6:g} MHz, "
-        f"{len(handover.calibrators)} calibrators, {cycles} Dicke cycles, "
-        f"{len(handover.s11)} S11s (recorded in the run file)"
-    ]
+    lines = pack([
+        f"hand-over: {handover.band_hz[0] / 1e6:g}-{handover.band_hz[1] / 1e6:g} MHz,",
+        f"{len(handover.calibrators)} calibrators,", f"{cycles} Dicke cycles,",
+        f"{len(handover.s11)} S11s", "(recorded in the run file)",
+    ])
     corrections = corrections_line(handover.corrections)
     if corrections:
-        lines.append(f"  corrections: {corrections}")
+        lines += fit(f"  corrections: {corrections}", "    ")
     lines += solution_lines(solution)
     floor, predicted, name = outcome.floor_k, outcome.predicted_k, outcome.validation.name
-    lines.append(
-        f"  on {name!r}: noise floor {1e3 * floor:.3f} mK, predicted "
-        f"calibration std {1e3 * predicted:.3f} mK, distance to floor {predicted / floor:.3f}"
-    )
+    lines += pack([
+        f"  on {name!r}: noise floor {1e3 * floor:.3f} mK,",
+        f"predicted calibration std {1e3 * predicted:.3f} mK,",
+        f"distance to floor {predicted / floor:.3f}",
+    ])
     choice = model_choice_line(outcome.model_choice_share, name)
     if choice:
-        lines.append(f"  {choice}")
+        lines += fit(f"  {choice}", "    ")
     if outcome.systematics is not None and outcome.systematic_k is not None:
         # The median beside the RMS: one channel where the calibrators' reflections line up
         # can hold most of the RMS.
         median = float(np.median(outcome.systematics.std_k(name)))
-        lines.append(
-            f"  VNA systematic on {name!r}: {1e3 * outcome.systematic_k:.3f} "
-            f"mK RMS, median {1e3 * median:.3f} mK ({outcome.systematics.describe()})"
-        )
+        lines += pack([
+            f"  VNA systematic on {name!r}: {1e3 * outcome.systematic_k:.3f} mK RMS,",
+            f"median {1e3 * median:.3f} mK", f"({outcome.systematics.describe()})",
+        ])
     if truth is not None:
         errors = truth.calibration_errors_k(solution, outcome.data, outcome.validation)
         actual = float(np.sqrt(np.mean(errors**2)))
-        lines.append(
-            f"  actual calibration error against the simulator's truth: "
-            f"{1e3 * actual:.3f} mK = {actual / floor:.3f} x floor"
-        )
+        lines += pack([
+            "  actual calibration error against the simulator's truth:",
+            f"{1e3 * actual:.3f} mK", f"= {actual / floor:.3f} x floor",
+        ])
         if isinstance(solution, ChannelSolution):
-            lines.append(per_channel_error_line(outcome, errors))
+            lines += per_channel_error_lines(outcome, errors)
     return lines
 
 
@@ -113,26 +121,33 @@ def solution_lines(solution: AnySolution) -> list[str]:
     """The solution's lines: its orders, or what a per-channel one has."""
     if isinstance(solution, ChannelSolution):
         numbers = solution.summary()
-        lines = [
+        lines = fit(
             f"solution: {method_name(solution)}, per channel ({numbers['n_channels']} channels, "
-            f"{len(solution.calibrators)} calibrators; uncorrelated errors between channels)"
-        ]
+            f"{len(solution.calibrators)} calibrators; uncorrelated errors between channels)",
+            "    ",
+        )
         if numbers["log_evidence"] is not None:
             lines.append(
                 f"  log evidence (sum over channels, eq. 4.22): {numbers['log_evidence']:.3f}"
             )
         return lines
     lines = [f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)"]
-    if solution.models_line():
-        lines.append(f"  averaged over models (orders, weight): {solution.models_line()}")
-    lines += [f"  {line}" for line in caution_lines(solution)]
+    models = solution.models_line()
+    if models:
+        pairs = models.split(", ")  # "(4,3,6,8,2) 0.093, ...": never a pair broken
+        lines += pack([
+            "  averaged over models (orders, weight):",
+            *[f"{pair}," for pair in pairs[:-1]], pairs[-1],
+        ])
+    for line in caution_lines(solution):
+        lines += fit(f"  {line}", "    ")
     lines.append(
         f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)"
     )
     return lines
 
 
-def per_channel_error_line(outcome: CalibrationOutcome, errors: FloatArray) -> str:
+def per_channel_error_lines(outcome: CalibrationOutcome, errors: FloatArray) -> list[str]:
     """Each channel's error in units of its own floor, for a per-channel solution.
 
     Where the calibrators' reflections line up (all real at one frequency, so T_cos and
@@ -150,13 +165,15 @@ def per_channel_error_line(outcome: CalibrationOutcome, errors: FloatArray) -> s
     degenerate = floor > 10 * np.median(floor)
     rms = float(np.sqrt(np.mean(ratio[~degenerate] ** 2)))
     worst = int(np.argmax(np.where(degenerate, -np.inf, ratio)))
-    line = (
-        f"  per channel: RMS of error / floor {rms:.3f} over {int(np.sum(~degenerate))} channels"
-        f" (largest {ratio[worst]:.2f} at {outcome.data.freq_hz[worst] / 1e6:.3f} MHz)"
-    )
+    chunks = [
+        f"  per channel: RMS of error / floor {rms:.3f}",
+        f"over {int(np.sum(~degenerate))} channels (largest {ratio[worst]:.2f} at "
+        f"{outcome.data.freq_hz[worst] / 1e6:.3f} MHz)",
+    ]
     if np.any(degenerate):
-        line += (
-            f"; {int(np.sum(degenerate))} with a floor over 10x the median, largest error / "
-            f"floor {float(np.max(ratio[degenerate])):.3f}"
-        )
-    return line
+        chunks[-1] += ";"
+        chunks += [
+            f"{int(np.sum(degenerate))} with a floor over 10x the median,",
+            f"largest error / floor {float(np.max(ratio[degenerate])):.3f}",
+        ]
+    return pack(chunks)
