@@ -5,7 +5,9 @@ module            holds
 ================  ==========================================================
 ``readings``      typed readings (value, unit, status, time) and their builders
 ``access``        the monitor's links while idle, the run's drivers during a run
-``alarms``        thresholds with hysteresis, and the hook that never blocks
+``alarms``        thresholds held for ``for_s``, hysteresis; the hook
+``wording``       alarm text for people (what, since when, which threshold)
+``arrivals``      whether the iTPM sends, from a run's counters and socket queue
 ``database``      SQLite (WAL): minute data, 15-minute means, retention
 ``exporter``      Prometheus text format on 127.0.0.1
 ``monitor``       the sampling thread and the run's safe points

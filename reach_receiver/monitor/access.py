@@ -15,7 +15,10 @@ They never talk to a device at the same time:
   temperature log, the spectrometer's packet counters.
 
 Both go through :func:`read_devices`, which turns each device's answer into readings and
-its failures into link statistics (:class:`Links`).
+its failures into link statistics (:class:`Links`). A device that nobody can ask (the
+run's drivers before they are connected or after they are closed, the TEC while its
+rail is off or while the Teensy it hangs on does not answer) is *unknown*, not down:
+``reach_device_up`` is NaN with status ``unknown``, and no alarm is raised for it.
 """
 
 from __future__ import annotations
@@ -66,12 +69,19 @@ class Links:
         state = self.of(device)
         state.up, state.last_good = True, t
 
-    def failed(self, device: str, err: BaseException) -> None:
+    def failed(self, device: str, err: BaseException | str) -> None:
         """A read of ``device`` failed."""
         state = self.of(device)
         if state.up is not False:
             log.warning("monitor: %s does not answer: %s", device, err)
         state.up, state.errors, state.last_error = False, state.errors + 1, str(err)
+
+    def unknown(self, device: str) -> None:
+        """``device`` cannot be asked now (powered off, not brought up): neither up nor down."""
+        state = self.of(device)
+        if state.up is not None:
+            log.info("monitor: %s not read (powered off or not brought up)", device)
+        state.up = None
 
     def readings(self, t: float) -> list[Reading]:
         """``reach_device_up``, the age of the last good reply, errors and reconnects."""
@@ -96,8 +106,9 @@ class DeviceSet:
 
     ``teensy_state`` gives the board's state when a run has just read it anyway (else
     ``None``: it is read), so the board is not asked twice; ``tec_usable`` says whether
-    the TEC's link is open. A TC-08 of ``None`` is not read (a run's temperature log
-    reads it; the monitor takes that log's readings instead).
+    the TEC's link is open, ``connected`` whether the drivers are (a run's are not yet
+    at its first safe point, nor after it closed them). A TC-08 of ``None`` is not read
+    (a run's temperature log reads it; the monitor takes that log's readings instead).
     """
 
     teensy: Teensy | None = None
@@ -106,18 +117,23 @@ class DeviceSet:
     ports: Mapping[int, str] = field(default_factory=dict)
     teensy_state: Callable[[], FrontEndState | None] = lambda: None
     tec_usable: Callable[[], bool] = lambda: True
+    connected: Callable[[], bool] = lambda: True
 
 
 def read_devices(devices: DeviceSet, links: Links, now: Callable[[], float]) -> list[Reading]:
     """One active sample: the board, its I2C sensors, the TEC (rail on), the TC-08.
 
     Each device's failure is recorded in ``links`` and leaves its readings out; the
-    others are still read. The TEC is read only while its rail is on: a TEC without
-    power is not a silent TEC.
+    others are still read. Drivers not connected are not asked (their devices are
+    unknown). The TEC is read only while its rail is on: a TEC without power is not a
+    silent TEC, and neither is one behind a Teensy that does not answer.
     """
     out: list[Reading] = []
+    connected = devices.connected()
     tec_on = False
-    if devices.teensy is not None:
+    if devices.teensy is not None and not connected:
+        links.unknown("teensy")
+    elif devices.teensy is not None:
         try:
             t = now()
             state = devices.teensy_state() or devices.teensy.read_state()
@@ -134,7 +150,11 @@ def read_devices(devices: DeviceSet, links: Links, now: Callable[[], float]) -> 
             links.good("tec", now())
         except (ReceiverError, OSError) as err:
             links.failed("tec", err)
-    if devices.tc08 is not None:
+    elif "tec" in links.states:
+        links.unknown("tec")
+    if devices.tc08 is not None and not connected:
+        links.unknown("tc08")
+    elif devices.tc08 is not None:
         try:
             out += tc08_readings(devices.tc08.read(), devices.ports)
             links.good("tc08", now())

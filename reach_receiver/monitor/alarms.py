@@ -1,12 +1,19 @@
-"""Alarms: thresholds with hysteresis on the readings, a log line and a hook per change.
+"""Alarms: thresholds held for a while, with hysteresis; a log line and a hook per change.
 
 Each :class:`~reach_receiver.config.monitoring.AlarmRule` watches every series of its
-metric (those with its labels). For one series the alarm is *raised* when a value is
-above ``above`` (or below ``below``) and *cleared* only when it is back inside by the
-hysteresis: ``value <= above - hysteresis`` (``value >= below + hysteresis``). A NaN
-value changes nothing (a failed read is its device's alarm, not the metric's). Each
-change is logged (``alarm raised: ...`` at WARNING or ERROR, ``alarm cleared: ...`` at
-INFO) and handed to the :class:`Hook`.
+metric (those with its labels). For one series the alarm is *raised* once its values
+have been above ``above`` (or below ``below``) without a break for the rule's ``for_s``
+(at the first such value when it is 0), and *cleared* only when a value is back inside
+by the hysteresis: ``value <= above - hysteresis`` (``value >= below + hysteresis``).
+A NaN value of a series that is read (a thermocouple flagged open: its own alarm says
+so) changes nothing; a reading of status ``unknown`` (a device powered off, not yet
+brought up, or not read by anyone) breaks a condition that was building up and clears
+a raised alarm: nobody is told a device is silent while it is switched off.
+
+Every alarm has two names: its text for people (:mod:`.wording`: "TC-08 not answering
+for 5 min (since 14:02 UTC; threshold 2 min)") and its *detail*, ``rule: series key``
+(:attr:`Alarm.id`), for scripts. Each change is logged with both (``alarm raised:`` at
+WARNING, ``alarm cleared:`` at INFO) and handed to the :class:`Hook`.
 
 The hook runs the site's command in a thread of its own with a timeout (then it is
 killed), so a mail server that hangs never holds up the daemon; at most
@@ -21,12 +28,13 @@ import math
 import queue
 import subprocess
 import threading
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 from reach_receiver.config.monitoring import AlarmRule
 
-from .readings import ERROR, NOMINAL, WARN, Reading
+from . import wording
+from .readings import ERROR, NOMINAL, UNKNOWN, WARN, Reading
 
 log = logging.getLogger(__name__)
 
@@ -34,29 +42,45 @@ log = logging.getLogger(__name__)
 MAX_PENDING = 32
 
 
-@dataclass(frozen=True)
+@dataclass
 class Alarm:
-    """A raised alarm: its rule, the series, the value that raised it, and when."""
+    """A raised alarm: its rule, its series, the latest value, since when it holds."""
 
     rule: AlarmRule
     key: str
     value: float
     raised_at: float
+    since: float = math.nan  # the first value out of range (``raised_at`` when not given)
+    labels: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.since):
+            self.since = self.raised_at
 
     @property
     def id(self) -> str:
-        """``rule name: series key``: one alarm per rule and series."""
+        """``rule name: series key``: one alarm per rule and series (the detail)."""
         return f"{self.rule.name}: {self.key}"
+
+    def text(self, now: float | None = None) -> str:
+        """The alarm in words at ``now`` (at the time it was raised by default)."""
+        return wording.raised(self.rule, self.labels, self.value, self.since,
+                              self.raised_at if now is None else now)
 
     @property
     def message(self) -> str:
-        """One line for logs, ``reach-run --status`` and the hook."""
-        limit = (
-            f"above {self.rule.above:g}"
-            if self.rule.above is not None and self.value > self.rule.above
-            else f"below {self.rule.below:g}"
-        )
-        return f"{self.rule.name}: {self.key} = {self.value:g}, {limit}"
+        """The text at the time it was raised, then the detail in brackets."""
+        return f"{self.text()} [{self.id}]"
+
+    def as_dict(self, now: float) -> dict[str, object]:
+        """For the daemon's ``status`` reply: the text, the detail and the numbers."""
+        rule = self.rule
+        return {
+            "text": self.text(now), "id": self.id, "name": rule.name, "series": self.key,
+            "severity": rule.severity, "value": None if math.isnan(self.value) else self.value,
+            "above": rule.above, "below": rule.below, "for_s": rule.for_s,
+            "since": self.since, "raised_at": self.raised_at,
+        }
 
 
 class AlarmBoard:
@@ -67,6 +91,7 @@ class AlarmBoard:
         self.hook = hook
         self.active: dict[str, Alarm] = {}
         self.history: list[tuple[str, Alarm, float]] = []  # (raised|cleared, alarm, time)
+        self._onset: dict[str, float] = {}  # out of range since, not raised yet
 
     def update(self, readings: Iterable[Reading]) -> list[Reading]:
         """Check each reading against the rules; return them with statuses upgraded."""
@@ -89,37 +114,59 @@ class AlarmBoard:
         """Raise or clear ``rule`` for the reading's series; whether it is raised after."""
         alarm_id = f"{rule.name}: {reading.key}"
         raised = self.active.get(alarm_id)
-        value = reading.value
+        value, t = reading.value, reading.timestamp
+        if reading.status == UNKNOWN:
+            self._onset.pop(alarm_id, None)
+            if raised is not None:
+                self._clear(alarm_id, raised, value, t, unknown=True)
+            return False
         if math.isnan(value):
             return raised is not None
         high = rule.above is not None and value > rule.above
         low = rule.below is not None and value < rule.below
-        if raised is None and (high or low):
-            alarm = Alarm(rule, reading.key, value, reading.timestamp)
-            self.active[alarm_id] = alarm
-            self.history.append(("raised", alarm, reading.timestamp))
-            level = logging.ERROR if rule.severity == "error" else logging.WARNING
-            log.log(level, "alarm raised: %s", alarm.message)
-            if self.hook is not None:
-                self.hook.fire("raised", alarm.rule.name, alarm.message)
-            return True
         if raised is not None:
+            raised.value = value
             inside_high = rule.above is None or value <= rule.above - rule.hysteresis
             inside_low = rule.below is None or value >= rule.below + rule.hysteresis
             if inside_high and inside_low:
-                del self.active[alarm_id]
-                self.history.append(("cleared", raised, reading.timestamp))
-                text = f"{raised.id} back to {value:g}"
-                log.info("alarm cleared: %s", text)
-                if self.hook is not None:
-                    self.hook.fire("cleared", rule.name, text)
+                self._clear(alarm_id, raised, value, t)
                 return False
             return True
-        return False
+        if not (high or low):
+            self._onset.pop(alarm_id, None)
+            return False
+        since = self._onset.setdefault(alarm_id, t)
+        if t - since < rule.for_s:
+            return False
+        del self._onset[alarm_id]
+        alarm = Alarm(rule, reading.key, value, t, since, dict(reading.labels))
+        self.active[alarm_id] = alarm
+        self.history.append(("raised", alarm, t))
+        log.warning("alarm raised: %s", alarm.message)
+        if self.hook is not None:
+            self.hook.fire("raised", rule.name, alarm.text(), alarm.id)
+        return True
 
-    def messages(self) -> list[str]:
-        """The raised alarms, one line each."""
-        return [alarm.message for alarm in self.active.values()]
+    def _clear(self, alarm_id: str, alarm: Alarm, value: float, t: float,
+               unknown: bool = False) -> None:
+        del self.active[alarm_id]
+        self.history.append(("cleared", alarm, t))
+        text = wording.cleared(alarm.rule, alarm.labels, value, alarm.since, t, unknown)
+        log.info("alarm cleared: %s [%s]", text, alarm.id)
+        if self.hook is not None:
+            self.hook.fire("cleared", alarm.rule.name, text, alarm.id)
+
+    def messages(self, now: float | None = None) -> list[str]:
+        """The raised alarms in words, one line each (their durations at ``now``)."""
+        return [alarm.text(now) for alarm in self.active.values()]
+
+    def details(self, now: float) -> list[dict[str, object]]:
+        """The raised alarms with their text, detail and numbers (:meth:`Alarm.as_dict`)."""
+        return [alarm.as_dict(now) for alarm in self.active.values()]
+
+    def ids(self) -> list[str]:
+        """The raised alarms' details, ``rule: series key``."""
+        return list(self.active)
 
 
 def _worse(a: str, b: str) -> str:
@@ -130,7 +177,11 @@ def _worse(a: str, b: str) -> str:
 
 
 class Hook:
-    """Runs ``command + [event, name, message]`` off the caller's thread, with a timeout."""
+    """Runs ``command + [event, name, text, detail]`` off the caller's thread, with a timeout.
+
+    ``event`` is ``raised`` or ``cleared``, ``name`` the rule's, ``text`` the alarm in
+    words and ``detail`` its ``rule: series key``.
+    """
 
     def __init__(self, command: Sequence[str], timeout_s: float) -> None:
         self.command = list(command)
@@ -140,10 +191,10 @@ class Hook:
         self._thread.start()
         self.completed: list[int | None] = []  # exit codes (None: killed at the timeout)
 
-    def fire(self, event: str, name: str, message: str) -> None:
+    def fire(self, event: str, name: str, text: str, detail: str = "") -> None:
         """Queue one run of the command; never blocks."""
         try:
-            self._queue.put_nowait([*self.command, event, name, message])
+            self._queue.put_nowait([*self.command, event, name, text, detail])
         except queue.Full:
             log.error("alarm hook: %d runs waiting; dropped: %s %s", MAX_PENDING, event, name)
 

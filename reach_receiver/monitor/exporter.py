@@ -5,7 +5,8 @@ the process's own metrics under names we do not choose) holding one collector th
 turns the latest reading of each series into a gauge sample: metric and label names as
 the readings carry them (``reach_tc08_temperature_celsius{channel="1",...}``), one HELP
 line per metric. Readings older than two cadences are left out rather than shown as if
-current; each raised alarm is a ``reach_alarm_active{alarm="..."}`` sample of 1.
+current; each raised alarm is a ``reach_alarm_active{alarm="<rule>: <series key>"}``
+sample of 1.
 
 The server binds ``127.0.0.1``: the site's network is not ours to expose; a Prometheus
 on another host reaches it through an SSH tunnel or a local agent.
@@ -79,8 +80,8 @@ class ReadingsCollector(Collector):
                 family.add_metric([reading.labels[n] for n in names], reading.value)
         alarm = GaugeMetricFamily("reach_alarm_active", "1 for each raised alarm",
                                   labels=["alarm"])
-        for text in self.alarms():
-            alarm.add_metric([text.split(" = ")[0]], 1.0)
+        for detail in self.alarms():
+            alarm.add_metric([detail], 1.0)
         yield from families.values()
         yield alarm
 

@@ -9,7 +9,8 @@ daemon's clock) and records a sample:
   (:class:`~.access.IdleDevices`), under the device lock the daemon takes before it
   commands the hardware itself (:meth:`Monitor.hardware`, :meth:`Monitor.hand_over`);
 * during a run (:meth:`Monitor.watch_run`): what the run reads anyway, shared: the
-  spectrometer's counters and the newest reading of the run's temperature log. The
+  spectrometer's counters and the newest reading of the run's temperature log (which
+  also tells whether the TC-08 answers: a new reading, or a failed read). The
   board and the TEC are read by the run's own thread at its safe points
   (:meth:`RunWatch.safe_point`: between steps, between Dicke positions, during waits),
   at most once a cadence, never inside an integration or a VNA sweep.
@@ -28,20 +29,32 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.devices.spectrometer import Spectrometer, SpectrometerStatistics
 from reach_receiver.devices.tc08 import DEFAULT_PORTS, Tc08Reading
+from reach_receiver.errors import ReceiverError
 
 from .access import DeviceSet, IdleDevices, Links, read_devices
 from .alarms import AlarmBoard, Hook
+from .arrivals import Arrivals
 from .database import QUARTER_S, MetricsDatabase
 from .exporter import Exporter, ReadingsCollector
 from .readings import Reading, disk_readings, spectrometer_readings, tc08_readings
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TemperatureLogState:
+    """A run's temperature log: whether it runs, its newest reading, its failed reads."""
+
+    logging: bool = False
+    latest: Tc08Reading | None = None
+    failures: int = 0
 
 
 class RunWatch:
@@ -56,7 +69,7 @@ class RunWatch:
     spectrometer
         The run's spectrometer, whose counters are read from the monitor's thread.
     temperature_log
-        ``() -> (logging, latest reading)`` of the run's temperature log.
+        ``() -> TemperatureLogState`` of the run's temperature log.
     """
 
     def __init__(
@@ -64,7 +77,7 @@ class RunWatch:
         monitor: Monitor,
         devices: DeviceSet,
         spectrometer: Spectrometer | None,
-        temperature_log: Callable[[], tuple[bool, Tc08Reading | None]],
+        temperature_log: Callable[[], TemperatureLogState],
     ) -> None:
         self.monitor = monitor
         self.devices = devices
@@ -78,7 +91,9 @@ class RunWatch:
         self._last_point = time.monotonic()
         self._last_stats: SpectrometerStatistics | None = None
         self._last_tc08 = -math.inf
+        self._log_failures = 0
         self._tc08 = devices.tc08
+        self.arrivals = Arrivals(monitor.links)
 
     @property
     def cadence_s(self) -> float:
@@ -98,11 +113,11 @@ class RunWatch:
             remembered = teensy.last_state if teensy is not None else None
             return remembered[1] if remembered and remembered[0] >= since else None
 
-        logging_temperatures, _ = self.temperature_log()
+        logging_temperatures = self.temperature_log().logging
         devices = DeviceSet(
             teensy, self.devices.tec, None if logging_temperatures else self._tc08,
             self.devices.ports, state_read_since,  # type: ignore[arg-type]
-            self.devices.tec_usable,
+            self.devices.tec_usable, self.devices.connected,
         )
         self._last_active = now
         readings = read_devices(devices, self.monitor.links, self.monitor.clock.now)
@@ -113,17 +128,40 @@ class RunWatch:
         self.safe_point_max_s = max(self.safe_point_max_s, self._last_point - started)
 
     def passive(self, now: float) -> list[Reading]:
-        """What the run read anyway: the spectrometer's counters, the temperature log."""
+        """What the run read anyway: the spectrometer's counters, the temperature log.
+
+        A new reading of the log is the TC-08 answering; a failed read of the log since
+        the last sample, with no reading after it, is the TC-08 not answering.
+        """
         out: list[Reading] = []
-        if self.spectrometer is not None:
-            stats = self.spectrometer.statistics
+        spectrometer = self.spectrometer
+        if spectrometer is not None:
+            stats = spectrometer.statistics
             out += spectrometer_readings(stats, self._last_stats, now)
             self._last_stats = stats
-        logging_temperatures, latest = self.temperature_log()
-        if logging_temperatures and latest is not None and latest.timestamp > self._last_tc08:
+            period = spectrometer.period or self.monitor.site.devices.spectrometer.period_s
+            self.arrivals.observe(stats, self._spectrometer_port(), period, self.cadence_s, now)
+        log_state = self.temperature_log()
+        latest = log_state.latest
+        links = self.monitor.links
+        if log_state.logging and latest is not None and latest.timestamp > self._last_tc08:
             self._last_tc08 = latest.timestamp
             out += tc08_readings(latest, self.devices.ports)
+            links.good("tc08", latest.timestamp)
+        elif log_state.logging and log_state.failures > self._log_failures:
+            failed = log_state.failures - self._log_failures
+            links.failed("tc08", f"tc08: {failed} read(s) of the temperature log failed")
+        self._log_failures = log_state.failures
         return out
+
+    def _spectrometer_port(self) -> int | None:
+        """The UDP port the run's spectrometer listens on; ``None`` while it does not."""
+        if self.spectrometer is None or not self.devices.connected():
+            return None
+        try:
+            return int(self.spectrometer.address[1])
+        except (ReceiverError, OSError):
+            return None
 
     def close(self) -> None:
         """The run is over: the monitor takes its own links again."""
@@ -198,7 +236,7 @@ class Monitor:
             self.board.hook = self.hook
         if settings.prometheus_port is not None:
             collector = ReadingsCollector(
-                self.latest, self.board.messages, lambda: 2 * self.cadence_s, self.clock.now
+                self.latest, self.alarm_ids, lambda: 2 * self.cadence_s, self.clock.now
             )
             self.exporter = Exporter(collector, settings.prometheus_port)
             log.info("monitor: Prometheus metrics on http://%s:%d/", *self.exporter.address)
@@ -240,7 +278,7 @@ class Monitor:
         self,
         devices: DeviceSet,
         spectrometer: Spectrometer | None,
-        temperature_log: Callable[[], tuple[bool, Tc08Reading | None]],
+        temperature_log: Callable[[], TemperatureLogState],
     ) -> RunWatch:
         """The run's side of the monitor (:class:`RunWatch`)."""
         self.hand_over()
@@ -252,9 +290,12 @@ class Monitor:
     def run_ended(self, watch: RunWatch | None = None) -> None:
         """The run is over (idempotent): idle sampling resumes."""
         with self._devices:
+            ended = self._run if watch is None else watch
             if watch is None or self._run is watch:
                 self._run = None
             self._run_mode = self._run is not None
+        if ended is not None:
+            ended.arrivals.reset()
 
     # ----------------------------------------------------------------- sampling
     def _loop(self) -> None:
@@ -317,15 +358,30 @@ class Monitor:
             return list(self._latest.values())
 
     def alarms(self) -> list[str]:
-        """The raised alarms, one line each."""
+        """The raised alarms in words, one line each, their durations as of now."""
+        now = self.clock.now()
         with self._record_lock:
-            return self.board.messages()
+            return self.board.messages(now)
+
+    def alarm_ids(self) -> list[str]:
+        """The raised alarms' details (``rule: series key``), one each."""
+        with self._record_lock:
+            return self.board.ids()
 
     def status(self) -> dict[str, object]:
-        """For the daemon's ``status`` reply: alarms and the latest readings."""
+        """For the daemon's ``status`` reply: alarms and the latest readings.
+
+        ``alarms`` holds each raised alarm in words; ``alarm_details`` the same alarms
+        with their detail (``id``: rule and series key) and numbers
+        (:meth:`~.alarms.Alarm.as_dict`).
+        """
         readings = sorted(self.latest(), key=lambda r: r.key)
+        now = self.clock.now()
+        with self._record_lock:
+            details = self.board.details(now)
         return {
-            "alarms": self.alarms(),
+            "alarms": [str(d["text"]) for d in details],
+            "alarm_details": details,
             "readings": [
                 {"key": r.key, "value": None if math.isnan(r.value) else r.value,
                  "unit": r.unit, "status": r.status, "t": r.timestamp}

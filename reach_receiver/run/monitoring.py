@@ -3,7 +3,9 @@
 When ``reachd`` runs a schedule, :func:`watch` lends the run's drivers to the monitor
 (:meth:`~reach_receiver.monitor.Monitor.watch_run`): the Teensy and the TEC are then
 read by the run's own thread at its safe points, and what the run reads anyway (the
-board's state, the temperature log, the spectrometer's counters) is shared. At the end,
+board's state, the temperature log, the spectrometer's counters) is shared. Until the
+run has connected its instruments (and after it closed them) the devices are not asked:
+the monitor shows them as unknown, not as silent. At the end,
 :func:`store_readings` puts every health reading taken during the run in its run file
 (measurement kind ``monitoring``). A plain ``reach-run`` has no monitor: nothing changes.
 """
@@ -11,10 +13,11 @@ board's state, the temperature log, the spectrometer's counters) is shared. At t
 from __future__ import annotations
 
 from reach_receiver.devices.spectrometer import Spectrometer
-from reach_receiver.devices.tc08 import Tc08, Tc08Reading
+from reach_receiver.devices.tc08 import Tc08
 from reach_receiver.devices.tec import Tec
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.monitor import STATUSES, DeviceSet, Monitor, Reading, RunWatch
+from reach_receiver.monitor.monitor import TemperatureLogState
 from reach_receiver.store.run_store import RunStore
 
 from .context import RunContext
@@ -30,14 +33,15 @@ def watch(monitor: Monitor, run: RunContext) -> RunWatch:
         tc08 if isinstance(tc08, Tc08) else None,
         dict(tc08.ports) if isinstance(tc08, Tc08) else {},
         tec_usable=lambda: instruments.tec_connected,
+        connected=lambda: instruments.connected,
     )
 
-    def temperature_log() -> tuple[bool, Tc08Reading | None]:
+    def temperature_log() -> TemperatureLogState:
         logger = run.temperatures
         if logger is None:
-            return False, None
+            return TemperatureLogState()
         readings = logger.readings(run.clock.now() - 2 * monitor.cadence_s)
-        return True, readings[-1] if readings else None
+        return TemperatureLogState(True, readings[-1] if readings else None, logger.failures)
 
     spectrometer = instruments.spectrometer
     taken = monitor.watch_run(

@@ -69,6 +69,7 @@ class Tc08StandIn:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._open: set[int] = set()
+        self._unplugged = False
         # open_circuit (a test's thread) and the updating thread both write the file:
         # one at a time, or one's replace finds the other's temporary file gone.
         self._writing = threading.Lock()
@@ -80,8 +81,9 @@ class Tc08StandIn:
             values = list(self._temperatures_c(self._clock.now()))
             for channel in self._open:
                 values[channel] = math.nan
+            text = "" if self._unplugged else " ".join(f"{v:.4f}" for v in values) + "\n"
             tmp = self.values.with_name(self.values.name + ".tmp")
-            tmp.write_text(" ".join(f"{v:.4f}" for v in values) + "\n")
+            tmp.write_text(text)
             os.replace(tmp, self.values)
 
     def open_circuit(self, channel: int, is_open: bool = True) -> None:
@@ -90,6 +92,15 @@ class Tc08StandIn:
             self._open.add(channel)
         else:
             self._open.discard(channel)
+        self.write()
+
+    def unplug(self, unplugged: bool = True) -> None:
+        """A unit that stops answering: every conversion fails (not responding) until plugged.
+
+        The values file is left empty, which the stand-in library answers with
+        ``USBTC08_ERROR_NOT_RESPONDING``, as a unit whose USB link dropped.
+        """
+        self._unplugged = unplugged
         self.write()
 
     def start(self) -> None:

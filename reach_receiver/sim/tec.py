@@ -18,7 +18,7 @@ exp(-t / tau)`` is applied for the clock time since the previous request.
 
 Faults settable at run time: corrupt checksums, garbled data, no reply, truncated
 replies (each for the next N replies), lost sets, forced fault bits, a stuck temperature
-reading.
+reading, an ambient beyond what the module can hold against.
 """
 
 from __future__ import annotations
@@ -187,6 +187,12 @@ class TecSimulator:
         """Force bits of the status fault word (3 = temperature limit); 0 clears."""
         with self._lock:
             self._fault_bits = bits
+
+    def set_ambient(self, celsius: float) -> None:
+        """Change the ambient from now on (a hot afternoon, a heat sink whose fan stopped)."""
+        with self._lock:
+            self._advance()
+            self.ambient_c = celsius
 
     def stick_temperature(self, stuck: bool) -> None:
         """Freeze the reported temperature at its present value (the model runs on)."""
