@@ -8,7 +8,9 @@ rule and its series' labels::
     enclosure 40.6 C above 40 C for 10 min (since 13:55 UTC)
     data disk 3.1 GB free, below 5 GB (since 09:12 UTC)
 
-and its clearing likewise (``TC-08 answering again after 7 min``). The series key
+and its clearing likewise (``TC-08 answering again after 7 min``). A rule of the site's
+own (not one of the defaults) has its name before the text: the operator's words for
+what it watches. The series key
 stays beside the text as the alarm's detail (:attr:`Alarm.id
 <reach_receiver.monitor.alarms.Alarm.id>`), for scripts and for ``reach-run metrics``.
 """
@@ -19,8 +21,9 @@ import math
 from collections.abc import Mapping
 from datetime import datetime, timezone
 
-from reach_receiver.config.monitoring import AlarmRule
+from reach_receiver.config.monitoring import DEFAULT_ALARMS, AlarmRule
 
+_DEFAULT_NAMES = frozenset(rule.name for rule in DEFAULT_ALARMS)
 #: How each monitored device is called in text.
 DEVICES = {"tc08": "TC-08", "teensy": "Teensy", "tec": "TEC", "vna": "VNA",
            "spectrometer": "spectrometer"}
@@ -108,6 +111,8 @@ def raised(rule: AlarmRule, labels: Mapping[str, str], value: float, since: floa
     if rule.metric.startswith("reach_disk_free"):
         shown += " free,"
     text = f"{what} {shown} {side} {bound}"
+    if rule.name not in _DEFAULT_NAMES:
+        text = f"{rule.name}: {text}"
     if rule.for_s > 0:
         return f"{text} for {lasting} (since {when})"
     return f"{text} (since {when})"

@@ -8,6 +8,20 @@ sends its packets to the receiver's address, as the iTPM does once per integrati
 It sends from one fixed address and port (:attr:`ItpmSimulator.sender`, loopback by
 default), which the simulated site names as the spectra's only source.
 
+While no socket of this machine is bound to the receiver's port (no run has its
+spectrometer connected), a spectrum would go nowhere: the simulator then neither
+computes nor sends it (:attr:`ItpmSimulatorStats.spectra_unheard`), so an idle
+``reachd --sim`` at high compression does not spend a core on spectra nobody reads. A
+receiver that binds the port gets the next period's spectrum, as from the real iTPM,
+which streams all the time. Where the kernel's socket table cannot be read, every
+spectrum is sent.
+
+A simulator starved of CPU skips spectra to keep up with the clock
+(:data:`MAX_LAG_PERIODS`). No measurement changes because of it: an integration
+averages the number of whole spectra it asks for, each a full period of the source it
+looked at, from those that arrive; a skipped spectrum only makes that position end
+later in simulated time (and the timestamps stored with it show the gap).
+
 Faults can be switched at run time (:meth:`ItpmSimulator.set_faults`): lost, duplicated
 or reordered packets, garbage datagrams, and a stall (nothing sent). They are drawn from
 one seeded generator, so a test's packet losses are reproducible.
@@ -16,9 +30,11 @@ one seeded generator, so a test's packet losses are reproducible.
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import logging
 import socket
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -26,6 +42,7 @@ import numpy as np
 
 from reach_receiver.clock import Clock
 from reach_receiver.devices import spead
+from reach_receiver.monitor.arrivals import port_bound
 
 logger = logging.getLogger(__name__)
 
@@ -37,6 +54,9 @@ SpectrumSource = Callable[[float, float], np.ndarray]
 #: a busy machine) would otherwise send ever older spectra, which the receiver skips as
 #: stale, and fall behind without bound.
 MAX_LAG_PERIODS = 4
+#: Real seconds between two looks at whether a receiver listens: a receiver that binds
+#: its port gets spectra this much later at most.
+LISTENER_CHECK_S = 0.05
 
 _PACKET = np.dtype([("header", ">u8", (1 + spead.N_ITEMS,)), ("payload", "V1024")])
 
@@ -145,7 +165,11 @@ class ItpmFaults:
 
 @dataclass
 class ItpmSimulatorStats:
-    """What the simulator did: spectra and packets sent, and faults injected."""
+    """What the simulator did: spectra and packets sent, and faults injected.
+
+    ``spectra_skipped`` counts spectra skipped to catch up with the clock while a
+    receiver listened; ``spectra_unheard`` those not made because nobody listened.
+    """
 
     spectra_sent: int = 0
     packets_sent: int = 0
@@ -153,6 +177,7 @@ class ItpmSimulatorStats:
     packets_duplicated: int = 0
     garbage_sent: int = 0
     spectra_skipped: int = 0
+    spectra_unheard: int = 0
 
 
 class ItpmSimulator:
@@ -207,6 +232,8 @@ class ItpmSimulator:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._sock: socket.socket | None = None
+        self._listener = True
+        self._listener_checked = -float("inf")
         self.error: BaseException | None = None
 
     @property
@@ -251,7 +278,9 @@ class ItpmSimulator:
         self._stop.set()
         if self.stats.spectra_skipped:
             logger.warning(
-                "iTPM simulator fell behind the clock and skipped %d of %d spectra",
+                "iTPM simulator fell behind the clock and skipped %d of %d spectra; no "
+                "measurement changed: each integration averaged as many whole spectra as it "
+                "asked for, and a skip made its position end later in simulated time",
                 self.stats.spectra_skipped,
                 self.stats.spectra_skipped + self.stats.spectra_sent,
             )
@@ -272,13 +301,36 @@ class ItpmSimulator:
         self.stop()
 
     def _wait_until(self, t: float) -> bool:
-        """Sleep in clock time until ``t``; False when asked to stop first."""
+        """Wait in clock time until ``t``; False when asked to stop first.
+
+        One wait on the stop event, not a poll: at high compression a period is a few
+        real milliseconds, and waking eight times in each cost an idle core a tenth.
+        """
         while not self._stop.is_set():
             remaining = t - self.clock.now()
             if remaining <= 0:
                 return True
-            self.clock.sleep(min(remaining, self.period_s / 8))
+            if self.clock.wait(self._stop, remaining):
+                return False
         return False
+
+    def _listened(self) -> bool:
+        """Whether a receiver may be listening: its local port bound, or not local.
+
+        The kernel's table is read at most every :data:`LISTENER_CHECK_S` real seconds
+        (a read costs a third of a millisecond, a period at 3000x a few milliseconds).
+        """
+        now = time.monotonic()
+        if now < self._listener_checked + LISTENER_CHECK_S:
+            return self._listener
+        host, port = self.address
+        try:
+            local = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            local = host == "localhost"
+        self._listener = not local or port_bound(port) is not False
+        self._listener_checked = now
+        return self._listener
 
     def _run(self) -> None:
         now = self.clock.now()
@@ -288,10 +340,20 @@ class ItpmSimulator:
         try:
             while self._wait_until(t_start + self.period_s):
                 behind = int((self.clock.now() - t_start) // self.period_s) - MAX_LAG_PERIODS
+                listened = self._listened()
                 if behind > 0:  # a starved simulator skips, as a real iTPM never lags
-                    self.stats.spectra_skipped += behind
+                    if listened:
+                        self.stats.spectra_skipped += behind
+                    else:
+                        self.stats.spectra_unheard += behind
                     heap_counter += behind
                     t_start += behind * self.period_s
+                    continue
+                if not listened:  # look again in a while, then skip what passed meanwhile
+                    self.stats.spectra_unheard += 1
+                    heap_counter += 1
+                    t_start += self.period_s
+                    self._stop.wait(LISTENER_CHECK_S)
                     continue
                 spectrum = np.asarray(self.source(t_start, self.period_s), dtype=float)
                 timestamp = round((t_start - sync_time) / spead.TIMESTAMP_UNIT_S)

@@ -34,6 +34,7 @@ import numpy as np
 
 from reach_receiver.clock import Clock, CompressedClock
 from reach_receiver.config.corrections import CorrectionSettings
+from reach_receiver.config.monitoring import MonitoringSettings
 from reach_receiver.config.settings import (
     DeviceSettings,
     SpectrometerSettings,
@@ -66,6 +67,10 @@ MAX_SPECTRA_PER_REAL_S = 100.0
 #: source, moves 0.02 K, below the readings' 0.05 K noise).
 TC08_REWRITES_PER_REAL_S = 50.0
 
+#: Health samples a real second the simulated site asks of ``reachd`` at most (see
+#: monitor_cadence_for).
+MONITOR_SAMPLES_PER_REAL_S = 4.0
+
 
 @dataclass(frozen=True)
 class SimulationSettings:
@@ -93,6 +98,17 @@ def spectrum_period_for(compression: float) -> float:
     and never shorter than REACH's own 1 s: 30 s at the default 3000x.
     """
     return max(1.0, compression / MAX_SPECTRA_PER_REAL_S)
+
+
+def monitor_cadence_for(compression: float) -> float:
+    """The simulated site's health cadence (s): a minute, or longer at high compression.
+
+    A sample asks the board, the TEC and the TC-08 and commits a transaction; one a
+    simulated minute at 3000x would be 50 a real second, half a core for an idle
+    ``reachd --sim``. At most :data:`MONITOR_SAMPLES_PER_REAL_S` a real second instead
+    (750 s at 3000x; REACH's minute from 240x down).
+    """
+    return max(60.0, compression / MONITOR_SAMPLES_PER_REAL_S)
 
 
 def simulated_site(
@@ -275,7 +291,12 @@ class SimulatedReceiver:
             references={"test_load": str(self.test_load_reference)},
             corrections=self.corrections(),
             simulation=self.clock.parameters if isinstance(self.clock, CompressedClock) else {},
+            monitoring=MonitoringSettings(cadence_s=monitor_cadence_for(self.clock_factor())),
         )
+
+    def clock_factor(self) -> float:
+        """How many times faster than real time the simulation's clock runs."""
+        return self.clock.factor if isinstance(self.clock, CompressedClock) else 1.0
 
     def corrections(self) -> CorrectionSettings:
         """What the site file says of the simulated effects' two-ports, cables and RFI."""
