@@ -3,7 +3,8 @@
 Two faces of one :class:`~reach_receiver.run.context.Progress`:
 
 * on a terminal, rich's live progress bar for the current step (which source and
-  position, spectra so far, time left in the step) under one line per top-level step;
+  position, spectra so far, time left in the step) under the plain lines of each
+  top-level step;
 * otherwise (a pipe, a log, ``nohup``), plain lines within 80 columns
   (:mod:`reach_receiver.run.progress_lines`, which a followed job prints too): two per
   top-level step, and inside a step a line at each tenth of its progress, at most one
