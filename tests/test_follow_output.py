@@ -31,6 +31,7 @@ SCHEDULE = """\
 schedule: follow
 steps:
   - initialise: {}
+  - temperatures: {period_s: 10}
   - vna_calibrate: {}
   - test_load_check: {}
   - s11: {targets: [cold, hot, c10open, c10short, ant, lna]}
@@ -151,7 +152,7 @@ def test_a_followed_job_prints_the_local_run_s_lines(reachd, tmp_path):
                 for i, x in enumerate(lines) if re.match(r"\[ *\d+/\d+\] ", x)]
 
     assert steps(err, run) == steps(local_err, local_run)
-    assert len(steps(err, run)) == 8
+    assert len(steps(err, run)) == 9
     assert re.search(r"^ +Dicke cold \(1/4\): \w+: \d+/\d+, \d:\d\d:\d\d left in the step$",
                      err, re.M), err
     assert not re.search(r"\],", err)  # no stray comma where a time was missing

@@ -26,6 +26,7 @@ CALIBRATING = """\
 schedule: journal
 steps:
   - initialise: {}
+  - temperatures: {period_s: 10}
   - vna_calibrate: {}
   - test_load_check: {}
   - s11: {targets: [cold, hot, c10open, c10short, ant, lna]}
@@ -104,7 +105,7 @@ def test_every_line_has_a_priority_and_the_story_is_at_info(tmp_path):
     for expected in (
         r"state starting -> idle",
         r"control: submit from uid \d+",
-        r"job 1 journal started: .*journal\.yaml, 8 steps",
+        r"job 1 journal started: .*journal\.yaml, 9 steps",
         r"state idle -> running: job 1 journal",
         r"journal\.yaml:\d+: calibrated: orders \(.*\), noise scale s\^2 [\d.]+, distance to "
         r"floor [\d.]+ on 'ant'",
