@@ -27,12 +27,14 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from reach_receiver.cli import remote
 from reach_receiver.config.daemon import DaemonSettings
-from reach_receiver.config.monitoring import DEFAULT_ALARMS, MonitoringSettings
+from reach_receiver.config.monitoring import DEFAULT_ALARMS, AlarmRule, MonitoringSettings
 from reach_receiver.config.site import replace_devices
 from reach_receiver.daemon.client import DaemonClient
 from reach_receiver.daemon.control import SOCKET_FILE
 from reach_receiver.daemon.service import Daemon, Directories
 from reach_receiver.devices.teensy import Teensy
+from reach_receiver.monitor import Reading
+from reach_receiver.monitor.alarms import AlarmBoard
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
 from tests.test_daemon_link import plug, until
 
@@ -308,3 +310,55 @@ def test_a_spectrometer_that_stops_sending_during_a_run_raises_its_alarm_only(id
     until(lambda: reachd.queue.get(job.id).state not in ("queued", "running"), timeout_s=60)
     assert reachd.queue.get(job.id).state == "completed", reachd.queue.get(job.id).reason
     assert not board.active, board.active
+
+
+# ----------------------------------------------------------------- the board alone
+SILENT = next(a for a in DEFAULT_ALARMS if a.name == "device silent")
+T0 = 1_790_000_000.0  # 2026-09-21 14:13:20 UTC
+
+
+def _up(value, t, status="nominal"):
+    return Reading("reach_device_up", value, "1", t, status, {"device": "tc08"})
+
+
+def test_a_device_failing_for_less_than_for_s_raises_nothing_and_after_it_raises_in_words():
+    board = AlarmBoard([SILENT])
+    board.update([_up(0.0, T0), _up(0.0, T0 + 60), _up(1.0, T0 + 90)])  # a minute's hiccup
+    assert not board.active
+    assert not board.history
+    board.update([_up(0.0, T0 + 120), _up(0.0, T0 + 180), _up(0.0, T0 + 240)])
+    (alarm,) = board.active.values()
+    assert (alarm.since, alarm.raised_at) == (T0 + 120, T0 + 240)
+    assert alarm.text() == "TC-08 not answering for 2 min (since 14:15 UTC; threshold 2 min)"
+    assert board.messages(T0 + 420) == [
+        "TC-08 not answering for 5 min (since 14:15 UTC; threshold 2 min)"]
+    assert alarm.message.endswith(" [device silent: reach_device_up{device=tc08}]")
+
+
+def test_an_unknown_device_raises_nothing_and_clears_its_alarm():
+    board = AlarmBoard([SILENT])
+    nan = float("nan")
+    board.update([_up(0.0, T0), _up(nan, T0 + 60, "unknown"), _up(0.0, T0 + 120)])
+    assert not board.active  # the onset was broken: not two minutes of failures
+    board.update([_up(0.0, T0 + 180), _up(0.0, T0 + 240)])
+    assert board.active
+    board.update([_up(nan, T0 + 300, "unknown")])  # powered off: not silent
+    assert not board.active
+    assert [what for what, _, _ in board.history] == ["raised", "cleared"]
+
+
+def test_thresholds_are_worded_with_their_unit_and_duration():
+    enclosure = AlarmRule("enclosure temperature", "reach_tec_temperature_celsius", above=24.0,
+                          hysteresis=0.5, for_s=600.0)
+    board = AlarmBoard([enclosure])
+    board.update([Reading("reach_tec_temperature_celsius", 25.3, "degC", T0 + k * 60)
+                  for k in range(11)])
+    assert board.messages() == ["enclosure 25.3 C above 24 C for 10 min (since 14:13 UTC)"]
+    board.update([Reading("reach_tec_temperature_celsius", 23.4, "degC", T0 + 720)])
+    assert not board.active  # back inside by the hysteresis
+    own = AlarmRule("lna hot", "reach_tc08_temperature_celsius", above=30.0)
+    board = AlarmBoard([own])
+    board.update([Reading("reach_tc08_temperature_celsius", 31.25, "degC", T0, labels={
+        "channel": "7", "component": "low noise amplifier"})])
+    assert board.messages() == [
+        "lna hot: thermocouple 7 (low noise amplifier) 31.2 C above 30 C (since 14:13 UTC)"]

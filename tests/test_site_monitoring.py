@@ -37,6 +37,10 @@ def _site_file(tmp_path: Path, monitoring: str) -> Path:
          "monitoring.alarms[0].metric", "a new alarm needs a metric"),
         ("  alarms:\n    - {name: lna, metric: reach_tc08_temperature_celsius}\n", 4,
          "monitoring.alarms[0].<threshold>", "give above, below or both"),
+        ("  alarms:\n    - {name: tec fault, for_s: -60}\n", 4,
+         "monitoring.alarms[0].for_s", "[0, inf)"),
+        ("  alarms:\n    - {name: tec fault, for_s: ten minutes}\n", 4,
+         "monitoring.alarms[0].for_s", "must be a number"),
         ("  alarms:\n    - {name: tec fault, severity: fatal}\n", 4,
          "monitoring.alarms[0].severity", "warn"),
         ("  alarms:\n    - {name: tec fault, enabled: no way}\n", 4,
@@ -68,7 +72,8 @@ def test_mistakes_in_several_alarms_are_reported_at_once(tmp_path):
 
 
 def test_alarms_merge_by_name_over_the_defaults(tmp_path):
-    path = _site_file(tmp_path, "  alarms:\n    - {name: enclosure temperature, above: 45}\n"
+    path = _site_file(tmp_path, "  alarms:\n    - {name: enclosure temperature, above: 45,"
+                                " for_s: 900}\n"
                                 "    - {name: lna hot, metric: reach_tc08_temperature_celsius,"
                                 " labels: {channel: 7}, above: 50, severity: warn}\n"
                                 "    - {name: thermocouple, enabled: false}\n")
@@ -76,6 +81,7 @@ def test_alarms_merge_by_name_over_the_defaults(tmp_path):
     assert set(rules) == {rule.name for rule in DEFAULT_ALARMS} | {"lna hot"}
     enclosure = rules["enclosure temperature"]
     assert (enclosure.below, enclosure.above, enclosure.hysteresis) == (10.0, 45.0, 0.5)
+    assert (enclosure.for_s, rules["device silent"].for_s) == (900.0, 120.0)
     assert rules["lna hot"] == AlarmRule("lna hot", "reach_tc08_temperature_celsius", above=50.0,
                                          severity="warn", labels={"channel": "7"})
     assert not rules["thermocouple"].enabled
@@ -88,7 +94,8 @@ def test_the_section_survives_a_round_trip_through_to_yaml(tmp_path):
                                 "  hook: {command: [/usr/bin/mail-alarm, -q], timeout_s: 5}\n"
                                 "  alarms:\n    - {name: low disk, below: 2.0e+10}\n"
                                 "    - {name: lna, metric: reach_tc08_temperature_celsius,"
-                                " labels: {channel: 7}, below: 0, above: 50, hysteresis: 1}\n"
+                                " labels: {channel: 7}, below: 0, above: 50, hysteresis: 1,"
+                                " for_s: 300}\n"
                                 "    - {name: spectrometer loss, enabled: false}\n")
     site = load_site(path)
     again = tmp_path / "again.yaml"
