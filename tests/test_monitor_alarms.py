@@ -307,6 +307,9 @@ def test_a_spectrometer_that_stops_sending_during_a_run_raises_its_alarm_only(id
     assert quiet - CADENCE_S <= onset <= quiet + 2 * CADENCE_S, onset
     assert FOR_S["device silent"] <= raised <= FOR_S["device silent"] + 2 * CADENCE_S, raised
     assert 0 <= cleared <= 2 * CADENCE_S, cleared
+    alarm = next(a for what, a, _ in reversed(board.history) if a.id == alarm_id)
+    assert re.fullmatch(r"spectrometer not sending for \d+ min \(since \d\d:\d\d UTC; "
+                        r"threshold 2 min\)", alarm.text()), alarm.text()
     until(lambda: reachd.queue.get(job.id).state not in ("queued", "running"), timeout_s=60)
     assert reachd.queue.get(job.id).state == "completed", reachd.queue.get(job.id).reason
     assert not board.active, board.active

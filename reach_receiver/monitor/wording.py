@@ -97,7 +97,7 @@ def raised(rule: AlarmRule, labels: Mapping[str, str], value: float, since: floa
     when = clock_time(since, now)
     lasting = duration(now - since)
     if rule.metric == "reach_device_up":
-        return (f"{what} not answering for {lasting} (since {when}; "
+        return (f"{what} not {_answering(labels)} for {lasting} (since {when}; "
                 f"threshold {duration(rule.for_s)})")
     if rule.metric == "reach_tc08_fault":
         return f"{what} open or out of range for {lasting} (since {when})"
@@ -126,9 +126,14 @@ def cleared(rule: AlarmRule, labels: Mapping[str, str], value: float, since: flo
     if unknown:
         return f"{what} no longer read (powered off or not brought up); alarm lasted {lasted}"
     if rule.metric == "reach_device_up":
-        return f"{what} answering again after {lasted}"
+        return f"{what} {_answering(labels)} again after {lasted}"
     if rule.metric == "reach_tc08_fault":
         return f"{what} reads again after {lasted}"
     if rule.metric == "reach_tec_fault_bits":
         return f"TEC fault bits clear after {lasted}"
     return f"{what} back to {quantity(rule.metric, value)} after {lasted}"
+
+
+def _answering(labels: Mapping[str, str]) -> str:
+    """What a working device does: the spectrometer sends, the others answer."""
+    return "sending" if labels.get("device") == "spectrometer" else "answering"
