@@ -44,7 +44,9 @@ INSTALLED = {
     "deploy/site.example.yaml": "/etc/reach/site.yaml",
 }
 #: Files of deploy/ that are tools or documentation, not installed.
-NOT_INSTALLED = {"README.md", "install.sh", "verify-unit.sh"}
+NOT_INSTALLED = {
+    "README.md", "install.sh", "venvs.sh", "uninstall.sh", "build-wheelhouse.sh", "verify-unit.sh",
+}
 
 
 # -- the example site ----------------------------------------------------------------------
@@ -67,6 +69,26 @@ def test_example_site_loads_with_reach_settings():
     assert ipaddress.ip_address(spectrometer.source).is_private
     assert ipaddress.ip_address(spectrometer.host).is_private
     assert site.references["test_load"].startswith("/etc/reach/")
+
+
+def test_example_site_has_every_section_and_the_daemons_services_on_loopback():
+    """Each section the site file takes is in the example, active or as a commented example."""
+    from reach_receiver.config.site import SECTIONS
+
+    text = EXAMPLE_SITE.read_text()
+    for section in SECTIONS:
+        if section == "simulation":  # written by reach-sim only
+            continue
+        assert re.search(rf"^(#   )?{section}:", text, re.M), section
+    site = load_site(EXAMPLE_SITE)
+    assert site.daemon.status_port == 8470
+    assert site.daemon.resume is True
+    assert site.monitoring.prometheus_port == 9818
+    assert site.monitoring.cadence_s == 60
+    # The tunnels the README gives reach exactly these ports.
+    readme = (DEPLOY / "README.md").read_text()
+    assert "-L 8470:127.0.0.1:8470 reach-backend" in readme
+    assert "-L 9818:127.0.0.1:9818 reach-backend" in readme
 
 
 def test_example_site_validates_every_shipped_schedule(capsys):
@@ -318,8 +340,10 @@ def test_install_dry_run_into_a_prefix_names_every_file_and_changes_nothing(tmp_
         if p.is_file() and p.name not in NOT_INSTALLED
     }
     assert shipped == set(INSTALLED), "a file of deploy/ that install.sh does not install"
-    assert f"-m venv {stage}/opt/reach/venv" in out
+    # A new environment of its own, switched to by renaming a link over /opt/reach/venv.
+    assert re.search(rf"-m venv {stage}/opt/reach/venvs/\d{{8}}T\d{{6}}Z-[^/\s]+\n", out)
     assert f"-m pip install --disable-pip-version-check --quiet {ROOT}" in out
+    assert f"mv -T {stage}/opt/reach/.venv.new {stage}/opt/reach/venv" in out
     assert f"systemd-sysusers --root={stage}" in out
     assert f"systemd-tmpfiles --root={stage} --create" in out
     # A staging root only: nothing acts on the running system.
@@ -339,9 +363,45 @@ def test_install_dry_run_on_the_live_system_lists_its_steps():
         "udevadm trigger",
         "systemctl daemon-reload",
         "/opt/reach/venv/bin/reachd --check --site /etc/reach/site.yaml",
+        "systemctl try-restart reachd",
         "systemctl enable --now reachd",
     ):
         assert step in out, step
+    # The running daemon is restarted only once the new environment is checked and in place.
+    assert out.index("would check") < out.index("mv -T") < out.index("try-restart")
+
+
+def test_uninstall_dry_run_on_the_live_system_lists_its_steps():
+    result = install("--uninstall", "--dry-run")
+    assert result.returncode == 0, result.stdout + result.stderr
+    out = result.stdout
+    for step in (
+        "systemctl disable --now reachd",
+        "rm -f /etc/systemd/system/reachd.service",
+        "rm -rf /opt/reach",
+        "systemctl daemon-reload",
+    ):
+        assert step in out, step
+    # Without --purge nothing of the data, the site file or the user is touched.
+    removals = [line for line in out.splitlines() if "would run" in line]
+    assert not [line for line in removals if "/var/lib/reach" in line or "/etc/reach" in line]
+    assert "userdel" not in out
+
+
+def test_install_refuses_mixed_or_bad_options(tmp_path):
+    for args, message in (
+        (["--purge"], "--purge goes with --uninstall"),
+        (["--keep", "0"], "--keep takes a whole number"),
+        (["--wheelhouse", str(tmp_path / "missing")], "no such directory"),
+        (["--wheelhouse", str(tmp_path)], "holds no wheels"),
+        (["--rollback", "--wheelhouse", str(tmp_path)], "--wheelhouse goes with an install"),
+        (["--wheelhouse"], "--wheelhouse needs a value"),
+    ):
+        result = install("--dry-run", *args)
+        assert result.returncode == 2, args
+        assert result.stderr.startswith("install.sh: "), args
+        assert message in result.stderr, (args, result.stderr)
+        assert len(result.stderr.splitlines()) == 1
 
 
 def test_install_rejects_unknown_arguments():
@@ -376,9 +436,9 @@ def test_install_into_a_staging_root(tmp_path):
     site = stage / "etc/reach/site.yaml"
     assert (stat.S_IMODE(site.stat().st_mode), site.stat().st_gid) == (0o640, gid)
     assert load_site(site).devices == load_site(EXAMPLE_SITE).devices
-    shipped = sorted(p.name for p in (ROOT / "schedules").glob("*.yaml"))
-    assert sorted(p.name for p in (stage / "opt/reach/schedules").iterdir()) == shipped
-    assert "commit: " in (stage / "opt/reach/INSTALLED").read_text()
+    # --skip-venv: the Python environments (and the schedules kept with them) untouched;
+    # tests/test_deploy_offline.py installs them.
+    assert not (stage / "opt").exists()
 
     # Again, after the operator edited the site file: it is kept, the rest is unchanged.
     site.write_text(site.read_text() + "# edited on site\n")
