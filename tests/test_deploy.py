@@ -580,3 +580,26 @@ def test_a_simulated_run_completes_without_wx_memory(wx_exec, tmp_path):
     assert "check test load: PASS" in result.stdout + result.stderr
     (run,) = [p for p in tmp_path.iterdir() if p.is_dir()]
     assert (run / "run.h5").is_file()
+
+
+def test_install_adopts_the_environment_of_the_previous_layout(tmp_path):
+    """/opt/reach/venv was a directory before environments were versioned: it is moved
+    among them (so it can be rolled back to) before the link takes its place."""
+    stage = tmp_path / "stage"
+    (stage / "opt/reach/venv/bin").mkdir(parents=True)
+    result = install("--dry-run", "--root", str(stage))
+    assert result.returncode == 0, result.stdout + result.stderr
+    out = result.stdout
+    legacy = rf"{stage}/opt/reach/venvs/\d{{8}}T\d{{6}}Z-legacy"
+    moved = re.search(rf"would run: mv -T {stage}/opt/reach/venv {legacy}\n", out)
+    assert moved, out
+    assert out.index(moved.group(0)) < out.index(f"mv -T {stage}/opt/reach/.venv.new")
+    assert (stage / "opt/reach/venv/bin").is_dir()  # a dry run
+
+
+def test_rollback_without_environments_is_refused(tmp_path):
+    result = install("--rollback", "--root", str(tmp_path))
+    assert result.returncode == 1
+    assert result.stderr.startswith("install.sh: ")
+    assert "is not a link to an environment" in result.stderr
+    assert len(result.stderr.splitlines()) == 1
