@@ -28,7 +28,7 @@
 # but the newest environments. deploy/README.md tells the whole procedure.
 set -euo pipefail
 
-usage() { sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { awk 'NR > 1 && /^set -euo/ { exit } NR > 1' "$0" | sed 's/^# \{0,1\}//'; }
 
 dry_run=0
 prefix=""

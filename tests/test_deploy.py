@@ -603,3 +603,13 @@ def test_rollback_without_environments_is_refused(tmp_path):
     assert result.stderr.startswith("install.sh: ")
     assert "is not a link to an environment" in result.stderr
     assert len(result.stderr.splitlines()) == 1
+
+
+def test_install_help_names_every_option():
+    result = install("--help")
+    assert result.returncode == 0
+    for option in ("--wheelhouse DIR", "--rollback", "--uninstall", "--purge", "--dry-run",
+                   "--root DIR", "--no-restart", "--keep N", "--skip-venv"):
+        assert option in result.stdout, option
+    assert result.stdout.rstrip().endswith("deploy/README.md tells the whole procedure.")
+    assert "set -euo" not in result.stdout
