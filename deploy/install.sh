@@ -126,6 +126,12 @@ reach_gid() { awk -F: '$1 == "reach" { print $3 }' "$root/etc/group" 2>/dev/null
 if [ "$live" -eq 1 ] && [ "$dry_run" -eq 0 ] && [ "$(id -u)" -ne 0 ]; then
     die "run as root (sudo $0), or try --dry-run"
 fi
+# One install.sh at a time: two would build, switch and prune over each other.
+if [ "$dry_run" -eq 0 ]; then
+    mkdir -p "$root/opt/reach"
+    exec 9>"$root/opt/reach/.install.lock"
+    flock -n 9 || die "another install.sh is working on ${root:-/} (it holds $root/opt/reach/.install.lock)"
+fi
 case "$mode" in
     rollback) rollback; say "done"; exit 0 ;;
     uninstall) uninstall; exit 0 ;;

@@ -11,6 +11,7 @@ of the unit's ``MemoryDenyWriteExecute=yes``.
 """
 
 import ctypes.util
+import fcntl
 import filecmp
 import ipaddress
 import os
@@ -438,7 +439,7 @@ def test_install_into_a_staging_root(tmp_path):
     assert load_site(site).devices == load_site(EXAMPLE_SITE).devices
     # --skip-venv: the Python environments (and the schedules kept with them) untouched;
     # tests/test_deploy_offline.py installs them.
-    assert not (stage / "opt").exists()
+    assert [p.name for p in (stage / "opt/reach").iterdir()] == [".install.lock"]
 
     # Again, after the operator edited the site file: it is kept, the rest is unchanged.
     site.write_text(site.read_text() + "# edited on site\n")
@@ -613,3 +614,15 @@ def test_install_help_names_every_option():
         assert option in result.stdout, option
     assert result.stdout.rstrip().endswith("deploy/README.md tells the whole procedure.")
     assert "set -euo" not in result.stdout
+
+
+def test_one_install_at_a_time(tmp_path):
+    """A second install.sh on the same root is refused while the first holds the lock."""
+    lock = tmp_path / "opt/reach/.install.lock"
+    lock.parent.mkdir(parents=True)
+    with lock.open("w") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        result = install("--rollback", "--root", str(tmp_path))
+    assert result.returncode == 1
+    assert result.stderr.startswith("install.sh: another install.sh is working on")
+    assert len(result.stderr.splitlines()) == 1
