@@ -24,43 +24,32 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import logging
 import signal
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from calibration.identifiability import caution_lines, model_choice_line
-from calibration.per_frequency import ChannelSolution
-from calibration.solvers import AnySolution, method_name
-from reach_receiver.clock import Clock
-from reach_receiver.config.site import SiteConfig, find_site, load_site
-from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
-from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
-from reach_receiver.errors import ReceiverError
-from reach_receiver.run.context import NoProgress, Progress
-from reach_receiver.run.session import RunFailed, RunSession, RunSummary
-from reach_receiver.run.steps.calibrate import CalibrationOutcome
-from reach_receiver.schedule.compile import ScheduleError
-from reach_receiver.schedule.timing import format_timeline, hms
-from reach_receiver.sim.effects import SimEffects
-from reach_receiver.sim.physics import PhysicsConfig
-from reach_receiver.sim.receiver import (
-    DEFAULT_COMPRESSION,
-    SimulatedReceiver,
-    SimulationSettings,
-    simulated_site,
-    spectrum_period_for,
-)
-from reach_receiver.store.corrections import corrections_line
-
-from . import remote
-from .display import PlainProgress, RichProgressDisplay
-from .health import metrics_main
 from .logs import add_version, configure_logging
+
+# The engine, the run layer and the simulator are imported when a schedule is checked or
+# run, not for ``--help``: they cost about a second before anything is printed.
+if TYPE_CHECKING:
+    from calibration.per_frequency import ChannelSolution
+    from calibration.solvers import AnySolution
+    from reach_receiver.clock import Clock
+    from reach_receiver.config.site import SiteConfig
+    from reach_receiver.run.context import Progress
+    from reach_receiver.run.session import RunSession, RunSummary
+    from reach_receiver.run.steps.calibrate import CalibrationOutcome
+    from reach_receiver.sim.receiver import SimulatedReceiver
+
+#: Simulated seconds per real second of ``--sim`` (the simulator's ``DEFAULT_COMPRESSION``;
+#: tests/test_cli_commands.py holds the two equal).
+DEFAULT_COMPRESSION = 3000.0
 
 log = logging.getLogger(__name__)
 
@@ -130,6 +119,8 @@ def parser() -> argparse.ArgumentParser:
     daemon.add_argument("--cancel", type=int, metavar="JOB", help="drop or stop a job")
     daemon.add_argument("--abort", action="store_true", help="stop the run now, go safe")
     daemon.add_argument("--resume", action="store_true", help="run the queue again")
+    p.add_argument("--json", action="store_true",
+                   help="with --validate/--dry-run: the checked schedule as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on standard error")
     p.add_argument("-v", "--verbose", action="store_true", help="log every action")
     add_version(p)
@@ -145,11 +136,36 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     """
     words = list(sys.argv[1:] if argv is None else argv)
     if words[:1] == ["metrics"]:
+        from .health import metrics_main
+
         return metrics_main(words[1:])
     if words[:1] == ["status"]:
         words = ["--status", *words[1:]]
     args = parser().parse_args(words)
     configure_logging(args.verbose)
+    return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command once its arguments are read: the heavy modules are imported here."""
+    from reach_receiver.config.site import find_site, load_site
+    from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
+    from reach_receiver.daemon.lock import HardwareBusy
+    from reach_receiver.errors import ReceiverError
+    from reach_receiver.run.session import RunFailed, RunSession
+    from reach_receiver.schedule.compile import ScheduleError
+    from reach_receiver.schedule.timing import format_timeline, hms
+    from reach_receiver.sim.effects import SimEffects
+    from reach_receiver.sim.physics import PhysicsConfig
+    from reach_receiver.sim.receiver import (
+        SimulatedReceiver,
+        SimulationSettings,
+        simulated_site,
+        spectrum_period_for,
+    )
+
+    from . import remote
+
     settings = SimulationSettings(
         compression=args.compression,
         spectrum_period_s=args.spectrum_period or spectrum_period_for(args.compression),
@@ -191,6 +207,9 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     entries = session.timeline()
     total_s = max((e.start_s + e.duration_s for e in entries if e.depth == 0), default=0.0)
     steps = len(session.schedule.steps)
+    if args.json:
+        print(json.dumps(_timeline_json(args.schedule, total_s, entries), indent=1))
+        return 0
     print(f"{args.schedule}: {steps} steps, estimated duration {hms(total_s)}", flush=True)
     if args.dry_run:
         print(format_timeline(entries))
@@ -232,6 +251,18 @@ def run_main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+def _timeline_json(path: Path, total_s: float, entries: Sequence[object]) -> dict[str, object]:
+    """A checked schedule for a program: its duration and every step's timing."""
+    return {
+        "schedule": str(path),
+        "valid": True,
+        "duration_s": total_s,
+        "steps": [
+            {k: str(v) if k == "where" else v for k, v in vars(e).items()} for e in entries
+        ],
+    }
+
+
 def _steering(args: argparse.Namespace) -> str | None:
     """The daemon request asked for, if any."""
     if args.attach is not None:
@@ -245,6 +276,8 @@ def _steering(args: argparse.Namespace) -> str | None:
 @contextlib.contextmanager
 def _owning_the_hardware(site: SiteConfig) -> Iterator[None]:
     """The hardware lock the daemon takes too; a warning where it cannot be made."""
+    from reach_receiver.daemon.lock import HardwareLock
+
     lock = HardwareLock(site.daemon.state_directory(), "reach-run")
     try:
         lock.acquire()
@@ -271,6 +304,10 @@ def _metadata(
 
 @contextlib.contextmanager
 def _display(clock: Clock, quiet: bool) -> Iterator[Progress]:
+    from reach_receiver.run.context import NoProgress
+
+    from .display import PlainProgress, RichProgressDisplay
+
     if quiet:
         yield NoProgress()
     elif sys.stderr.isatty():
@@ -304,6 +341,10 @@ def _stopping_on_signals(session: RunSession) -> Iterator[None]:
 
 def _print_solution(solution: AnySolution) -> None:
     """The solution's lines of the summary: its orders, or what a per-channel one has."""
+    from calibration.identifiability import caution_lines
+    from calibration.per_frequency import ChannelSolution
+    from calibration.solvers import method_name
+
     if isinstance(solution, ChannelSolution):
         numbers = solution.summary()
         print(
@@ -322,6 +363,11 @@ def _print_solution(solution: AnySolution) -> None:
 
 
 def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
+    from calibration.identifiability import model_choice_line
+    from calibration.per_frequency import ChannelSolution
+    from reach_receiver.schedule.timing import hms
+    from reach_receiver.store.corrections import corrections_line
+
     print(f"run file: {summary.run_file}")
     print(f"simulated/real time of the run: {hms(summary.elapsed_s)}")
     for check in summary.checks:
@@ -350,6 +396,8 @@ def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
     if outcome.systematics is not None and outcome.systematic_k is not None:
         # The median beside the RMS: one channel where the calibrators' reflections line up
         # can hold most of the RMS.
+        import numpy as np
+
         median = float(np.median(outcome.systematics.std_k(outcome.validation.name)))
         print(
             f"  VNA systematic on {outcome.validation.name!r}: {1e3 * outcome.systematic_k:.3f} "
@@ -380,6 +428,8 @@ def _print_per_channel_errors(
     among the channels counted is shown with its frequency: about 3-4 over a thousand
     channels of Gaussian errors, far more where one channel alone moves the RMS.
     """
+    import numpy as np
+
     data, source = outcome.data, outcome.validation
     errors = sim.physics.calibration_errors_k(solution, data, source)
     floor = outcome.floor_std_k

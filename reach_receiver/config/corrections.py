@@ -37,8 +37,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from calibration.touchstone import read_touchstone_network
-
 from .fields import REQUIRED, Fields
 
 #: The largest Touchstone file a site may name: a network of ~10^5 frequencies.
@@ -98,6 +96,10 @@ def touchstone_problem(path: Path, ports: int) -> str | None:
         return f"{path} is {info.st_size} bytes: a Touchstone file has at most " + str(
             MAX_TOUCHSTONE_BYTES
         )
+    # Imported here: numpy is a fifth of a second, which a site file without corrections
+    # (every reach-run status) need not pay.
+    from calibration.touchstone import read_touchstone_network
+
     try:
         network = read_touchstone_network(path)
     except (OSError, ValueError) as err:  # TouchstoneError is a ValueError

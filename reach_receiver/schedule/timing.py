@@ -24,9 +24,11 @@ stop the check instead of overflowing a date or running for hours.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
+from pathlib import PurePath
 
 from reach_receiver.config.yaml_lines import Problem
 from reach_receiver.devices.vna_settings import SweepSettings
@@ -232,24 +234,26 @@ def timing_problems(
     return walk.problems
 
 
-def format_timeline(entries: Sequence[TimelineEntry]) -> str:
-    """A readable table of the timeline (start, duration, step, file:line) and the total."""
-    rows = [("start", "duration", "step", "where")]
-    end = 0.0
-    for entry in entries:
-        rows.append(
-            (
-                hms(entry.start_s),
-                hms(entry.duration_s),
-                "  " * entry.depth + entry.description,
-                str(entry.where),
-            )
-        )
-        if entry.depth == 0:
-            end = entry.start_s + entry.duration_s
-    widths = [max(len(row[i]) for row in rows) for i in range(3)]
-    lines = [
-        f"{a:>{widths[0]}}  {b:>{widths[1]}}  {c:<{widths[2]}}  {d}".rstrip() for a, b, c, d in rows
-    ]
-    lines.append(f"{'total':>{widths[0]}}  {hms(end):>{widths[1]}}")
+def format_timeline(entries: Sequence[TimelineEntry], width: int = 80) -> str:
+    """A table of the timeline (start, duration, step and file:line) and the total.
+
+    Each row fits in ``width`` columns (an operator's terminal over SSH): a long step is
+    wrapped under its own column, and its place in the schedule, ``file:line`` with the
+    file's name only, follows the step in brackets.
+    """
+    rows = [(hms(e.start_s), hms(e.duration_s), e.depth, e.description, e.where) for e in entries]
+    end = max((e.start_s + e.duration_s for e in entries if e.depth == 0), default=0.0)
+    w0 = max([len("start"), *(len(r[0]) for r in rows)])
+    w1 = max([len("duration"), len(hms(end)), *(len(r[1]) for r in rows)])
+    lead = w0 + w1 + 4
+    lines = [f"{'start':>{w0}}  {'duration':>{w1}}  step  where"]
+    for start, duration, depth, description, where in rows:
+        indent = "  " * depth
+        text = f"{description} [{PurePath(where.file).name}:{where.line}]"
+        wrapped = textwrap.wrap(
+            text, max(20, width - lead - len(indent) - 2), break_on_hyphens=False
+        ) or [""]
+        lines.append(f"{start:>{w0}}  {duration:>{w1}}  {indent}{wrapped[0]}")
+        lines += [" " * (lead + len(indent) + 2) + more for more in wrapped[1:]]
+    lines.append(f"{'total':>{w0}}  {hms(end):>{w1}}")
     return "\n".join(lines)
