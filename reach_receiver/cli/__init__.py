@@ -41,8 +41,8 @@ def reachd_main(argv: Sequence[str] | None = None) -> int:
 
 
 def run_main(argv: Sequence[str] | None = None) -> int:
-    """``reach-run`` (:mod:`.run`)."""
-    return _main("reach-run", ".run", "run_main", argv)
+    """``reach-run`` (:mod:`.commands`, which dispatches to :mod:`.run` and the others)."""
+    return _main("reach-run", ".commands", "main", argv)
 
 
 def sim_main(argv: Sequence[str] | None = None) -> int:

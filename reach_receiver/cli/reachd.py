@@ -73,6 +73,10 @@ def reachd_main(argv: Sequence[str] | None = None) -> int:
     except ReceiverError as err:
         print(f"reachd: {err}", file=sys.stderr)
         return 2
+    problem = _site_out_problem(args.site_out) if args.sim else None
+    if problem:
+        print(f"reachd: --site-out {args.site_out}: {problem}", file=sys.stderr)
+        return 2
     if args.check:
         if base is None:
             print("reachd: --check needs a site file", file=sys.stderr)
@@ -102,6 +106,19 @@ def _with_sim(base: SiteConfig | None, sim: SiteConfig, args: argparse.Namespace
     if base is None:
         site = dataclasses.replace(site, daemon=DaemonSettings())
     return _with_dirs(site, args)
+
+
+def _site_out_problem(path: Path | None) -> str | None:
+    """Why ``--site-out`` cannot be written, checked before the simulator starts."""
+    if path is None:
+        return None
+    if path.is_dir():
+        return "is a directory"
+    if not path.parent.is_dir():
+        return f"no directory {path.parent}"
+    if not os.access(path.parent, os.W_OK | os.X_OK):
+        return f"the directory {path.parent} is not writable"
+    return None
 
 
 def _write(path: Path, text: str) -> None:

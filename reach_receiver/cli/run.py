@@ -165,6 +165,7 @@ def _run(args: argparse.Namespace) -> int:
     )
 
     from . import remote
+    from .steer import request
 
     settings = SimulationSettings(
         compression=args.compression,
@@ -189,7 +190,8 @@ def _run(args: argparse.Namespace) -> int:
         with DaemonClient(control) as client:
             if steering == "attach":
                 return remote.follow(client, args.attach or None)
-            return remote.steer(client, steering, **({"job": args.cancel} if args.cancel else {}))
+            fields = {"job": args.cancel} if args.cancel else {}
+            return request(client, steering, json_out=args.json, every=True, **fields)
     if args.schedule is None:
         print("reach-run: give a schedule (or --attach, --status, ...)", file=sys.stderr)
         return 2
