@@ -117,7 +117,9 @@ class Daemon(ControlRequests):
         self.page = None
         if site.daemon.status_port is not None:  # read-only, 127.0.0.1 only (.status_page)
             self.page = StatusPage(site.daemon.status_port, self._status_reply, directories.runs,
-                                   lambda: self.monitor.database, clock.now)
+                                   lambda: self.monitor.database, clock.now,
+                                   lambda: [{**j.public(), "result": j.result}
+                                            for j in self.queue.jobs()])
         self.paused = False
         self.current = None
         self.session = None

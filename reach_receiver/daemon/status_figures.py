@@ -51,9 +51,12 @@ from reach_receiver.monitor.readings import parse_key
 from reach_receiver.store import RUN_FILE, Measurement, RunContents, read_run_file
 
 __all__ = [
+    "CAPTIONS",
     "FIGURES",
     "current_solution",
+    "data_version",
     "dicke_spectra",
+    "last_spectrum",
     "runs_newest_first",
     "s11s",
     "temperatures_last_day",
@@ -234,3 +237,47 @@ FIGURES: dict[str, Callable[[Path, MetricsDatabase | None, float], Figure]] = {
     "temperatures": lambda runs, db, now: temperatures_last_day(db, now),
     "solution": lambda runs, db, now: current_solution(runs),
 }
+
+
+#: What each figure shows, in words (the image's alternative text).
+CAPTIONS = {
+    "spectra": "the latest Dicke cycle's spectra and Q",
+    "s11": "the latest S11s",
+    "temperatures": "the temperatures of the last day",
+    "solution": "the current solution's noise-wave parameters",
+}
+
+
+def _stat(path: Path) -> tuple[str, int, int] | None:
+    try:
+        info = path.stat()
+    except OSError:
+        return None
+    return path.name, info.st_mtime_ns, info.st_size
+
+
+def data_version(name: str, runs: Path, database: MetricsDatabase | None) -> str:
+    """A string that changes when the data behind figure ``name`` change (cheap: stats only).
+
+    The run figures depend on the runs searched (each run file, and each part of a run
+    still running); the temperatures on the metrics database (its file and its WAL).
+    """
+    if name == "temperatures":
+        if database is None:
+            return "closed"
+        wal = database.path.with_name(database.path.name + "-wal")
+        return repr((_stat(database.path), _stat(wal)))
+    directories = sorted((p for p in runs.glob("*") if p.is_dir()), reverse=True)
+    seen = []
+    for directory in directories[:RUNS_SEARCHED]:
+        seen.append((directory.name, _stat(directory / RUN_FILE)))
+        parts = directory / "parts"
+        if parts.is_dir():
+            seen.extend(_stat(p) for p in sorted(parts.iterdir()))
+    return repr(seen)
+
+
+def last_spectrum(runs: Path) -> float | None:
+    """The time of the newest stored Dicke cycle (a running run's parts included)."""
+    newest = _newest_with(runs, "dicke")
+    return None if newest is None else float(newest[1][-1].timestamp)

@@ -4,15 +4,20 @@
 
     ssh -L 8470:127.0.0.1:8470 reach@backend     # then open http://127.0.0.1:8470/
 
-* ``/``: the state and since when, the current job and step with the time left, the
-  queue, the raised alarms (the daemon's and the health monitor's) and the latest
-  health readings, with one image per figure of :mod:`.status_figures` (the latest
-  Dicke spectra, the S11s, the temperatures of the last day, the current solution);
-  the page reloads itself every :data:`REFRESH_S` seconds (a ``meta`` refresh: no
-  script);
-* ``/figure/<name>.png``: a figure, drawn on request by one worker thread (so a page
-  never takes more than one core from a run) and kept for :data:`CACHE_S` seconds;
+* ``/``: the page in words (:mod:`.status_html`: state, alarms, last calibration,
+  recent jobs, time since the last spectrum, health readings) with one image per figure
+  of :mod:`.status_figures`; it reloads itself every :data:`REFRESH_S` seconds (a
+  ``meta`` refresh: no script);
+* ``/figure/<name>``: a figure, drawn by one worker thread (so a page never takes more
+  than one core from a run) and drawn again only when its data change;
 * ``/status.json``: the daemon's ``status`` reply, as the control socket gives it.
+
+Made for a slow satellite link: every answer carries an ``ETag`` (a figure's from the
+version of its data, :func:`.status_figures.data_version`, so a browser's revalidation
+is answered ``304 Not Modified`` without drawing anything) and ``Cache-Control:
+no-cache`` (kept, but revalidated at each reload); text and SVG are sent gzipped to a
+client that accepts it; each figure is sent as SVG or as a palette PNG, whichever is
+smaller once compressed. A reload in steady state costs the HTML and a few 304s.
 
 Read-only by construction: the handler answers ``GET`` (and ``HEAD``) and nothing
 else, and it holds no reference to anything that acts (it gets the status as a
@@ -26,161 +31,146 @@ save a few lines.
 
 from __future__ import annotations
 
-import html
+import email.utils
+import gzip
+import hashlib
 import json
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 from reach_receiver.monitor.database import MetricsDatabase
-from reach_receiver.schedule.timing import hms
 
-__all__ = ["CACHE_S", "HOST", "REFRESH_S", "FigureCache", "StatusPage", "render_page"]
+from .status_html import REFRESH_S, render_page
+
+__all__ = ["HOST", "REFRESH_S", "Body", "FigureCache", "StatusPage", "render_page"]
 
 log = logging.getLogger(__name__)
 
 #: The only address the page is served on.
 HOST = "127.0.0.1"
-#: Seconds between the page's reloads.
-REFRESH_S = 15
-#: Seconds a drawn figure is served again before it is drawn anew.
-CACHE_S = 10.0
 #: Seconds a request waits for its figure.
 RENDER_TIMEOUT_S = 60.0
+#: Bodies smaller than this are sent as they are (gzip's header would not pay).
+GZIP_MIN = 256
+#: Kinds of content worth compressing.
+COMPRESSIBLE = ("text/", "application/json", "image/svg+xml")
 
 Status = Callable[[], Mapping[str, Any]]
-Render = Callable[[str], bytes]
+
+
+@dataclass(frozen=True)
+class Body:
+    """One answer's content: its type, bytes, gzipped bytes (if smaller), tag and time."""
+
+    kind: str
+    data: bytes
+    gzipped: bytes | None
+    etag: str
+    modified: float
+
+    @classmethod
+    def of(cls, kind: str, data: bytes, etag: str | None = None,
+           modified: float | None = None) -> Body:
+        """``data`` with its gzip (when compressible and smaller) and an ``ETag``."""
+        packed = None
+        if len(data) >= GZIP_MIN and kind.startswith(COMPRESSIBLE):
+            packed = gzip.compress(data, compresslevel=6, mtime=0)
+            packed = packed if len(packed) < len(data) else None
+        tag = etag or _tag(data)
+        return cls(kind, data, packed, tag, time.time() if modified is None else modified)
+
+
+def _tag(content: bytes | str) -> str:
+    raw = content.encode() if isinstance(content, str) else content
+    return '"' + hashlib.sha256(raw).hexdigest()[:20] + '"'
+
+
+#: Draws a figure: (content type, bytes).
+Render = Callable[[str], tuple[str, bytes]]
+#: The version of a figure's data.
+Version = Callable[[str], str]
 
 
 class FigureCache:
-    """PNGs by name, drawn by one worker thread, each kept for ``ttl_s`` seconds.
+    """Figures by name, drawn by one worker thread, drawn again only when their data change.
 
-    Two requests for the same stale figure wait for the same drawing.
+    ``version(name)`` is cheap (file stats); a figure whose version is the one it was
+    drawn at is served as kept. Two requests for the same stale figure wait for the same
+    drawing.
     """
 
-    def __init__(self, render: Render, names: tuple[str, ...], ttl_s: float = CACHE_S) -> None:
-        self.render, self.names, self.ttl_s = render, names, ttl_s
+    def __init__(self, render: Render, version: Version, names: tuple[str, ...]) -> None:
+        self.render, self.version, self.names = render, version, names
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="status-figures")
         self._lock = threading.Lock()
-        self._kept: dict[str, tuple[float, bytes]] = {}
-        self._drawing: dict[str, Any] = {}
+        self._kept: dict[str, Body] = {}
+        self._drawing: dict[tuple[str, str], Any] = {}
+        self.drawn = 0  # figures drawn so far (the benchmark and tests read it)
 
-    def get(self, name: str) -> bytes:
-        """The PNG of figure ``name`` (``KeyError`` for an unknown name)."""
+    def etag(self, name: str, version: str | None = None) -> str:
+        """The ``ETag`` figure ``name`` has at its data's current version."""
         if name not in self.names:
             raise KeyError(name)
+        return _tag(f"{name}\0{self.version(name) if version is None else version}")
+
+    def get(self, name: str) -> Body:
+        """Figure ``name`` at its data's current version (``KeyError`` for an unknown name)."""
+        version = self.version(name) if name in self.names else ""
+        tag = self.etag(name, version)
         with self._lock:
             kept = self._kept.get(name)
-            if kept is not None and time.monotonic() - kept[0] < self.ttl_s:
-                return kept[1]
-            future = self._drawing.get(name)
+            if kept is not None and kept.etag == tag:
+                return kept
+            future = self._drawing.get((name, tag))
             if future is None:
-                future = self._drawing[name] = self._pool.submit(self._draw, name)
-        return bytes(future.result(timeout=RENDER_TIMEOUT_S))
+                future = self._drawing[(name, tag)] = self._pool.submit(self._draw, name, tag)
+        return future.result(timeout=RENDER_TIMEOUT_S)  # type: ignore[no-any-return]
 
-    def _draw(self, name: str) -> bytes:
+    def _draw(self, name: str, tag: str) -> Body:
         try:
-            png = self.render(name)
+            kind, data = self.render(name)
+            body = Body.of(kind, data, etag=tag)
             with self._lock:
-                self._kept[name] = (time.monotonic(), png)
-            return png
+                self._kept[name] = body
+                self.drawn += 1
+            return body
         finally:
             with self._lock:
-                self._drawing.pop(name, None)
+                self._drawing.pop((name, tag), None)
 
     def close(self) -> None:
         """Stop the worker (a drawing under way finishes)."""
         self._pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _table(rows: list[tuple[str, str]]) -> str:
-    cells = "".join(f"<tr><th>{html.escape(k)}</th><td>{v}</td></tr>" for k, v in rows)
-    return f"<table>{cells}</table>"
+def smallest_image(figure: Any, dpi: float) -> tuple[str, bytes]:
+    """``figure`` as SVG or as a palette PNG, whichever is smaller as sent (SVG gzipped).
 
-
-def _readings(health: Mapping[str, Any]) -> str:
-    rows = []
-    for r in health.get("readings") or []:
-        value = "—" if r.get("value") is None else f"{r['value']:.4g} {r.get('unit', '')}"
-        status = str(r.get("status", ""))
-        rows.append(
-            f'<tr class="{html.escape(status)}"><td>{html.escape(str(r.get("key")))}</td>'
-            f"<td>{html.escape(value)}</td><td>{html.escape(status)}</td></tr>"
-        )
-    if not rows:
-        return "<p>no health readings yet</p>"
-    return (f"<details><summary>{len(rows)} health readings</summary><table>"
-            f"<tr><th>series</th><th>value</th><th>status</th></tr>{''.join(rows)}</table>"
-            "</details>")
-
-
-def render_page(status: Mapping[str, Any], figures: tuple[str, ...], now: float) -> str:
-    """The page's HTML for a ``status`` reply (:mod:`.protocol`) and the figures' names.
-
-    ``now`` is the wall-clock time of the page (the figures may run on a simulated clock).
+    Dense lines are decimated to the figure's pixel width by the builders, so an SVG
+    is usually the smaller; a figure of many markers or filled areas may not be.
     """
-    esc = html.escape
-    job = status.get("job") or {}
-    left = status.get("left_s")
-    health = status.get("health") or {}
-    alarms = [*(status.get("alarms") or []), *(health.get("alarms") or [])]
-    since = status.get("since")
-    rows = [
-        ("state", f'<span class="state">{esc(str(status.get("state")))}</span>'
-                  + (f" since {esc(_utc(since))}" if since else "")),
-        ("job", esc(f"{job.get('id')} {job.get('name')}") if job else "none"),
-        ("step", esc(str(status.get("step"))) if status.get("step") else "none"),
-        ("time left", esc(hms(float(left))) if left is not None else "—"),
-        ("queue", esc(", ".join(f"job {j}" for j in status.get("queue") or [])) or "empty"),
-    ]
-    if status.get("paused"):
-        rows.append(("queue paused", "yes: an operator's resume is needed"))
-    alarm_html = (
-        "<ul class=\"alarms\">" + "".join(f"<li>{esc(str(a))}</li>" for a in alarms) + "</ul>"
-        if alarms else '<p class="ok">no alarm raised</p>'
-    )
-    stamp = int(now)
-    images = "".join(
-        f'<figure><img src="/figure/{name}.png?t={stamp}" alt="{name}" width="1150"></figure>'
-        for name in figures
-    )
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<meta http-equiv="refresh" content="{REFRESH_S}">
-<title>reachd: {esc(str(status.get("state")))}</title>
-<style>
-body {{ font-family: system-ui, sans-serif; margin: 1em auto; max-width: 1180px;
-       color: #222; padding: 0 1em; }}
-h1 {{ font-size: 1.4em; margin: 0.2em 0; }}
-table {{ border-collapse: collapse; margin: 0.4em 0; }}
-th, td {{ text-align: left; padding: 0.15em 0.8em 0.15em 0; vertical-align: top; }}
-.state {{ font-weight: bold; font-size: 1.2em; }}
-.alarms li {{ color: #b00; font-weight: bold; }}
-.ok {{ color: #070; }}
-tr.warn td {{ color: #a60; }} tr.error td {{ color: #b00; }}
-figure {{ margin: 1em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
-</style></head><body>
-<h1>REACH receiver: reachd</h1>
-<p>{esc(str(status.get("status", "")))}<br><small>as of {esc(_utc(now))};
-reloads every {REFRESH_S} s; read-only</small></p>
-{_table(rows)}
-<h2>Alarms</h2>
-{alarm_html}
-{_readings(health)}
-<h2>Figures</h2>
-{images}
-</body></html>
-"""
+    from matplotlib import rc_context
+    from PIL import Image
 
-
-def _utc(t: float) -> str:
-    return time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(float(t)))
+    raw = BytesIO()
+    figure.savefig(raw, format="png", dpi=dpi)
+    image = Image.open(BytesIO(raw.getvalue())).convert("RGB")
+    png = BytesIO()
+    image.quantize(colors=64, method=Image.Quantize.MEDIANCUT).save(png, "PNG", optimize=True)
+    svg = BytesIO()
+    with rc_context({"svg.fonttype": "none", "svg.hashsalt": "reach-status"}):
+        figure.savefig(svg, format="svg", dpi=dpi, metadata={"Date": None})
+    if len(gzip.compress(svg.getvalue(), 6)) < len(png.getvalue()):
+        return "image/svg+xml", svg.getvalue()
+    return "image/png", png.getvalue()
 
 
 class _Handler(BaseHTTPRequestHandler):
@@ -188,40 +178,79 @@ class _Handler(BaseHTTPRequestHandler):
 
     page: StatusPage  # set on the subclass the server is made with
     server_version = "reachd-status"
+    protocol_version = "HTTP/1.1"  # keep-alive: one TCP (and tunnel) setup per reload
 
     def do_GET(self) -> None:  # the name http.server dispatches to
         path = self.path.split("?", 1)[0]
         if path in ("/", "/index.html"):
-            text = render_page(self.page.status(), self.page.figures.names, time.time())
-            self._send(200, "text/html; charset=utf-8", text.encode())
+            self._answer(Body.of("text/html; charset=utf-8", self.page.html().encode()))
         elif path == "/status.json":
-            self._send(200, "application/json", json.dumps(self.page.status()).encode())
-        elif path.startswith("/figure/") and path.endswith(".png"):
-            name = path.removeprefix("/figure/").removesuffix(".png")
+            self._answer(Body.of("application/json", json.dumps(self.page.status()).encode()))
+        elif path.startswith("/figure/"):
+            name = path.removeprefix("/figure/")
+            figures = self.page.figures
             try:
-                png = self.page.figures.get(name)
+                if self._fresh(figures.etag(name), None):
+                    return
+                body = figures.get(name)
             except KeyError:
-                self._send(404, "text/plain", b"no such figure\n")
+                self._send(404, Body.of("text/plain", b"no such figure\n"))
                 return
             except Exception:  # a figure that cannot be drawn is logged, the page lives on
                 log.exception("status page: figure %s could not be drawn", name)
-                self._send(500, "text/plain", b"the figure could not be drawn (see the log)\n")
+                self._send(500, Body.of("text/plain",
+                                        b"the figure could not be drawn (see the log)\n"))
                 return
-            self._send(200, "image/png", png)
+            self._answer(body)
         else:
-            self._send(404, "text/plain", b"not found\n")
+            self._send(404, Body.of("text/plain", b"not found\n"))
 
     def do_HEAD(self) -> None:
         self.do_GET()
 
-    def _send(self, code: int, kind: str, body: bytes) -> None:
+    def _fresh(self, etag: str, modified: float | None) -> bool:
+        """Answer ``304 Not Modified`` if the client holds this version already."""
+        match = self.headers.get("If-None-Match")
+        if match is not None:
+            fresh = etag in [t.strip().removeprefix("W/") for t in match.split(",")]
+        elif modified is not None and self.headers.get("If-Modified-Since"):
+            try:
+                since = email.utils.parsedate_to_datetime(self.headers["If-Modified-Since"])
+                fresh = int(modified) <= since.timestamp()
+            except (TypeError, ValueError):
+                fresh = False
+        else:
+            fresh = False
+        if fresh:
+            self.send_response(304)
+            self.send_header("ETag", etag)
+            self.send_header("Cache-Control", "no-cache")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+        return fresh
+
+    def _answer(self, body: Body) -> None:
+        if not self._fresh(body.etag, body.modified):
+            self._send(200, body)
+
+    def _send(self, code: int, body: Body) -> None:
+        accepts = self.headers.get("Accept-Encoding", "")
+        zipped = body.gzipped is not None and "gzip" in accepts
+        data = body.gzipped if zipped and body.gzipped is not None else body.data
         self.send_response(code)
-        self.send_header("Content-Type", kind)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
+        self.send_header("Content-Type", body.kind)
+        self.send_header("Content-Length", str(len(data)))
+        if code == 200:
+            self.send_header("ETag", body.etag)
+            self.send_header("Last-Modified", email.utils.formatdate(body.modified, usegmt=True))
+            self.send_header("Cache-Control", "no-cache")  # kept, revalidated at each use
+        if body.gzipped is not None:
+            self.send_header("Vary", "Accept-Encoding")
+        if zipped:
+            self.send_header("Content-Encoding", "gzip")
         self.end_headers()
         if self.command != "HEAD":
-            self.wfile.write(body)
+            self.wfile.write(data)
 
     def log_message(self, format: str, *args: Any) -> None:
         log.debug("status page %s: " + format, self.client_address[0], *args)
@@ -242,6 +271,9 @@ class StatusPage:
         The metrics database, or ``None`` while it is not open.
     now
         The daemon's clock, for the figures' "last day" (a simulator's clock runs fast).
+    jobs
+        The daemon's jobs, oldest first, as the protocol shows them with their
+        ``result`` lines (for the recent jobs and the last calibration).
     """
 
     def __init__(
@@ -251,24 +283,43 @@ class StatusPage:
         runs: Path,
         database: Callable[[], MetricsDatabase | None],
         now: Callable[[], float] = time.time,
+        jobs: Callable[[], Sequence[Mapping[str, Any]]] = list,
     ) -> None:
         from . import status_figures  # matplotlib: only for a daemon that serves the page
 
-        self.port, self.status, self.runs, self.database, self.now = (
-            port, status, runs, database, now
+        self.port, self.status, self.runs, self.database, self.now, self.jobs = (
+            port, status, runs, database, now, jobs
         )
+        self._figures = status_figures
         self._builders = status_figures.FIGURES
-        self.figures = FigureCache(self._render, tuple(self._builders))
+        self.figures = FigureCache(self._render, self._version, tuple(self._builders))
+        self._spectrum: tuple[str, float | None] = ("", None)
         self._server: ThreadingHTTPServer | None = None
         self._thread: threading.Thread | None = None
 
-    def _render(self, name: str) -> bytes:
+    def _version(self, name: str) -> str:
+        return self._figures.data_version(name, self.runs, self.database())
+
+    def _render(self, name: str) -> tuple[str, bytes]:
         from calibration.figures.style import DPI
 
         fig = self._builders[name](self.runs, self.database(), self.now())
-        out = BytesIO()
-        fig.savefig(out, format="png", dpi=DPI)
-        return out.getvalue()
+        return smallest_image(fig, DPI)
+
+    def last_spectrum(self) -> float | None:
+        """The newest stored spectrum's time, read again only when the runs change."""
+        version = self._version("spectra")
+        if version != self._spectrum[0]:
+            self._spectrum = (version, self._figures.last_spectrum(self.runs))
+        return self._spectrum[1]
+
+    def html(self) -> str:
+        """The page as it is now."""
+        captions = self._figures.CAPTIONS
+        return render_page(
+            self.status(), [(n, captions.get(n, n)) for n in self.figures.names], time.time(),
+            jobs=self.jobs(), last_spectrum=self.last_spectrum(), clock_now=self.now(),
+        )
 
     @property
     def address(self) -> tuple[str, int]:
