@@ -6,6 +6,7 @@ its run leaves), then a long wait that is still running while the page is read, 
 health alarm the site raises on purpose (any thermocouple above -100 degC).
 """
 
+import gzip
 import io
 import os
 import re
@@ -15,6 +16,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.error
 import urllib.request
 from html.parser import HTMLParser
 from pathlib import Path
@@ -23,9 +25,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from benchmarks.status_page_bytes import Client
 from reach_receiver.cli import run_main
 from reach_receiver.config.site import load_site
 from reach_receiver.daemon.client import DaemonClient
+from reach_receiver.daemon.status_page import StatusPage
 from reach_receiver.errors import ReceiverError
 from reach_receiver.sim.receiver import SimulationSettings, simulated_site
 
@@ -149,15 +153,34 @@ def test_the_page_shows_the_daemon_with_live_data_in_chromium(reachd):
     assert status["step"].split(":")[0] in page.text
     assert ALARM in page.text
     assert "time left" in page.text
+    assert "Last calibration" in page.text
+    assert "job 1 quick" in page.text
+    assert "completed" in page.text
+    assert "last spectrum" in page.text
     assert len(page.images) == len(FIGURES)
     for name, src in zip(FIGURES, page.images, strict=True):
-        assert src.startswith(f"/figure/{name}.png")
+        assert src == f"/figure/{name}"  # one address per figure: revalidated, not refetched
         with urllib.request.urlopen(url + src.lstrip("/"), timeout=60) as answer:
-            assert answer.headers["Content-Type"] == "image/png"
-            image = np.asarray(Image.open(io.BytesIO(answer.read())).convert("L"), float)
-        assert image.shape[1] == 1150, name
-        assert image.shape[0] > 300, name  # a figure, not a one-line note
-        assert image.std() > 10, name  # not blank
+            kind, body = answer.headers["Content-Type"], answer.read()
+        assert kind in ("image/png", "image/svg+xml"), name
+        if kind == "image/png":
+            image = np.asarray(Image.open(io.BytesIO(body)).convert("L"), float)
+            assert image.shape[1] == 1150, name
+            assert image.shape[0] > 300, name  # a figure, not a one-line note
+            assert image.std() > 10, name  # not blank
+        else:
+            assert b"<svg" in body, name
+            assert body.count(b"<path") > 20, name  # a figure, not a one-line note
+
+    # Over the link: a conditional, gzip-accepting client gets the page and its figures
+    # once (under 400 kB), then each reload under 60 kB (the HTML and 304s).
+    client = Client(url, conditional=True)
+    first = client.reload()
+    reloads = [client.reload() for _ in range(3)]
+    assert first < 400_000, first
+    assert max(reloads) < 60_000, reloads
+    assert client.get("/")[0][:2] == b"\x1f\x8b"  # gzipped
+    assert client.get(page.images[0]) == (b"", 304)
 
     shot = tmp / "status-page.png"
     chromium(f"--screenshot={shot}", "--window-size=1200,4200", url)
@@ -180,3 +203,50 @@ def test_a_bad_status_port_is_reported_at_its_line(tmp_path):
     again = tmp_path / "again.yaml"
     again.write_text(load_site(site).to_yaml())  # as reachd --site-out writes it back
     assert load_site(again).daemon.status_port == 8470
+
+
+def _get(url: str, **headers: str):
+    request = urllib.request.Request(url, headers=headers)
+    try:
+        with urllib.request.urlopen(request, timeout=60) as answer:
+            return answer.status, answer.headers, answer.read()
+    except urllib.error.HTTPError as err:
+        return err.code, err.headers, err.read()
+
+
+def test_a_figure_is_revalidated_until_its_data_change(tmp_path):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    page = StatusPage(0, lambda: {"state": "idle", "status": "idle"}, runs, lambda: None)
+    page.start()
+    try:
+        figure = page.url + "figure/s11"
+        code, headers, body = _get(figure)
+        assert code == 200
+        assert body
+        assert headers["Cache-Control"] == "no-cache"
+        etag = headers["ETag"]
+        assert page.figures.drawn == 1
+        # The same data: 304 with no body and nothing drawn again, by ETag or by date.
+        code, _, body = _get(figure, **{"If-None-Match": etag})
+        assert (code, body) == (304, b"")
+        code, _, _ = _get(figure, **{"If-Modified-Since": headers["Last-Modified"]})
+        assert code == 304
+        assert page.figures.drawn == 1
+        # A new run (even one that cannot be read) is new data: a new tag, drawn again.
+        (runs / "20260101T000000").mkdir()
+        (runs / "20260101T000000" / "run.h5").write_bytes(b"not hdf5")
+        code, headers, _ = _get(figure, **{"If-None-Match": etag})
+        assert code == 200
+        assert headers["ETag"] != etag
+        assert page.figures.drawn == 2
+        # The HTML: gzipped when accepted, the same bytes when not.
+        code, headers, zipped = _get(page.url, **{"Accept-Encoding": "gzip"})
+        assert headers["Content-Encoding"] == "gzip"
+        assert b"no job yet" in gzip.decompress(zipped)
+        code, headers, plain = _get(page.url)
+        assert "Content-Encoding" not in headers
+        assert b"no job yet" in plain
+        assert _get(page.url + "figure/nothing")[0] == 404
+    finally:
+        page.close()
