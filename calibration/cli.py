@@ -369,6 +369,16 @@ def _draws_arg(text: str) -> int:
     return draws
 
 
+def _version() -> str:
+    """The installed project's version (the same as reach-run's)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("reach-receiver")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``reach-cal`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -376,6 +386,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate, solve, apply and summarise REACH noise-wave calibrations.",
         epilog="Exit status: 0 success, 2 error (message on stderr).",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, func: Command) -> argparse.ArgumentParser:

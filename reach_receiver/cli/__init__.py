@@ -13,6 +13,7 @@ before it imports the run layer).
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -33,6 +34,11 @@ def _main(program: str, module: str, function: str, argv: Sequence[str] | None) 
     except KeyboardInterrupt:
         print(f"{program}: interrupted", file=sys.stderr)
         return INTERRUPTED
+    except BrokenPipeError:
+        # The reader went away (``reach-run metrics X | head``): stop quietly, and keep
+        # Python from reporting the pipe again when it flushes at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
 
 
 def reachd_main(argv: Sequence[str] | None = None) -> int:

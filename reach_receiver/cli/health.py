@@ -21,6 +21,7 @@ offset is given) or Unix seconds (:func:`parse_time`). "Now" is the site's clock
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import difflib
 import math
 import re
@@ -29,12 +30,18 @@ import time
 from collections.abc import Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from reach_receiver.config.site import find_site, load_site
 from reach_receiver.errors import ReceiverError
-from reach_receiver.monitor.database import MetricsDatabase, write_csv
-from reach_receiver.monitor.readings import parse_key
+
+# The monitor package (its database, its access server) is imported by the commands that
+# read it, not by ``reach-run status``, which starts in a tenth of a second without it.
+if TYPE_CHECKING:
+    from reach_receiver.monitor.database import MetricsDatabase
+
+#: At most this many lines of a series by default (``--all`` prints every point).
+SUMMARY_LINES = 40
 
 #: Seconds per unit of a ``--since`` duration.
 UNITS_S = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0, "w": 7 * 86400.0}
@@ -82,6 +89,8 @@ def _value(value: float | None, unit: str) -> str:
 
 def format_health(health: Mapping[str, Any] | None, now: float | None = None) -> list[str]:
     """The ``health`` of a daemon's ``status`` reply as lines readable at a glance."""
+    from reach_receiver.monitor.readings import parse_key
+
     if not health:
         return ["health: no readings (the daemon has no monitor)"]
     now = time.time() if now is None else now
@@ -108,23 +117,27 @@ def format_health(health: Mapping[str, Any] | None, now: float | None = None) ->
         age = now - float(r["t"])
         if age > 2 * cadence:
             flags += f"  ({age:.0f} s old)"
-        lines.append(f"{text:<58} {_value(r['value'], str(r['unit'])):>12}{flags}")
+        text = text if len(text) <= 50 else text[:47] + "..."
+        lines.append(f"{text:<50} {_value(r['value'], str(r['unit'])):>12}{flags}")
     return lines
 
 
 # --------------------------------------------------------------------------- metrics
 def metrics_parser() -> argparse.ArgumentParser:
     """The command line of ``reach-run metrics``."""
-    p = argparse.ArgumentParser(
-        prog="reach-run metrics",
-        description="Print or export a series of the daemon's metrics database.",
-    )
+    from .commands import subparser
+
+    p = subparser("metrics", "Summarise, print or export a series of the daemon's metrics "
+                  "database: by default each series' count, first and last, min/mean/max and "
+                  f"at most {SUMMARY_LINES} evenly spaced points.")
     p.add_argument("name", nargs="?", help="series key, metric, or metric{label=value}; "
                    "without it, the series the database holds")
     p.add_argument("--since", default="24h", help="start: 24h, 30d, an ISO time or Unix s "
                    "(default 24h)")
     p.add_argument("--until", default=None, help="end (default: now)")
     p.add_argument("--csv", type=Path, metavar="FILE", help="write CSV here ('-': stdout)")
+    p.add_argument("--all", action="store_true", help="every point, not the summary")
+    p.add_argument("--json", action="store_true", help="every point as JSON")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--site", type=Path, help="site file ($REACH_SITE, /etc/reach/site.yaml)")
     where.add_argument("--database", type=Path, help="the metrics file itself")
@@ -146,6 +159,8 @@ def metrics_main(argv: Sequence[str]) -> int:
     except (ReceiverError, ValueError) as err:
         print(f"reach-run metrics: {err}", file=sys.stderr)
         return 2
+    from reach_receiver.monitor.database import MetricsDatabase
+
     if not path.is_file():
         print(f"reach-run metrics: no metrics database at {path} (has reachd run?)",
               file=sys.stderr)
@@ -159,6 +174,8 @@ def metrics_main(argv: Sequence[str]) -> int:
 
 def _show(database: MetricsDatabase, args: argparse.Namespace, since: float,
           until: float) -> int:
+    from reach_receiver.monitor.database import write_csv
+
     if args.name is None:
         for key in database.keys(None):
             print(key)
@@ -182,15 +199,53 @@ def _show(database: MetricsDatabase, args: argparse.Namespace, since: float,
             args.csv.write_text(text, encoding="utf-8")
             print(f"{len(points)} rows of {key} written to {args.csv}")
         return 0
+    if args.json:
+        from .commands import dumps
+
+        print(dumps({key: {"unit": database.unit(key), "points": [
+            dataclasses.asdict(p) for p in database.series(key, since, until)]}
+            for key in keys}))
+        return 0
     for key in keys:
-        _print_series(key, database.unit(key), database.series(key, since, until))
+        points = database.series(key, since, until)
+        if args.all:
+            _print_series(key, database.unit(key), points)
+        else:
+            _print_summary(key, database.unit(key), points)
     return 0
+
+
+def _print_summary(key: str, unit: str, points: Sequence[Any]) -> None:
+    """Count, first and last, min/mean/max, and at most SUMMARY_LINES evenly spaced points."""
+    print(f"{key} ({unit}): {len(points)} points")
+    if not points:
+        return
+    values = [p.value for p in points if math.isfinite(p.value)]
+    first, last = (_stamp(points[i].t) for i in (0, -1))
+    print(f"  from {first} to {last} UTC")
+    if values:
+        mean = sum(values) / len(values)
+        print(f"  min {_value(min(values), unit)}  mean {_value(mean, unit)}  "
+              f"max {_value(max(values), unit)}")
+    step = max(1, math.ceil(len(points) / SUMMARY_LINES))
+    shown = list(points[::step])
+    if len(points) > len(shown):
+        print(f"  every {step}th point (all: --all, --csv FILE or --json):")
+    _print_points(unit, shown)
+
+
+def _stamp(t: float) -> str:
+    return datetime.fromtimestamp(t, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
 
 
 def _print_series(key: str, unit: str, points: Sequence[Any]) -> None:
     print(f"{key} ({unit}): {len(points)} points")
+    _print_points(unit, points)
+
+
+def _print_points(unit: str, points: Sequence[Any]) -> None:
     for p in points:
-        stamp = datetime.fromtimestamp(p.t, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+        stamp = _stamp(p.t)
         flag = "" if p.status == "nominal" else f"  [{p.status}]"
         mean = "  (15-min mean)" if p.resolution_s > 60 else ""
         print(f"  {stamp}  {_value(p.value, unit)}{flag}{mean}")
@@ -198,6 +253,8 @@ def _print_series(key: str, unit: str, points: Sequence[Any]) -> None:
 
 def _close(database: MetricsDatabase, name: str) -> str:
     """``; close names: ...`` from the series keys and metrics the database holds."""
+    from reach_receiver.monitor.readings import parse_key
+
     keys = database.keys()
     metrics = sorted({parse_key(k)[0] for k in keys})
     close = difflib.get_close_matches(name, metrics + keys, n=5, cutoff=0.5)

@@ -26,16 +26,16 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
-from reach_receiver.clock import Clock, SystemClock
-from reach_receiver.config.daemon import DaemonSettings
-from reach_receiver.config.site import SiteConfig, find_site, load_site
-from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
-from reach_receiver.devices.teensy import Teensy
 from reach_receiver.errors import ReceiverError
 
 from .logs import add_version, configure_logging
 
+# The site file's modules, the lock and the Teensy's driver are imported once the
+# arguments are read (``reachd --help`` answers without them); the run layer and the
+# engine only after the front-end is safe (:func:`_serve`).
 if TYPE_CHECKING:
+    from reach_receiver.clock import Clock
+    from reach_receiver.config.site import SiteConfig
     from reach_receiver.run.summary import Truth
 
 log = logging.getLogger("reach_receiver.daemon")
@@ -68,14 +68,16 @@ def reachd_main(argv: Sequence[str] | None = None) -> int:
     """``reachd``: exit 0 after a clean stop, 1 when it cannot start, 2 for bad input."""
     args = parser().parse_args(argv)
     configure_logging(args.verbose)
+    problem = _site_out_problem(args.site_out) if args.sim else None
+    if problem:
+        print(f"reachd: --site-out {args.site_out}: {problem}", file=sys.stderr)
+        return 2
+    from reach_receiver.config.site import find_site, load_site
+
     try:
         base = load_site(find_site(args.site)) if (args.site or not args.sim) else None
     except ReceiverError as err:
         print(f"reachd: {err}", file=sys.stderr)
-        return 2
-    problem = _site_out_problem(args.site_out) if args.sim else None
-    if problem:
-        print(f"reachd: --site-out {args.site_out}: {problem}", file=sys.stderr)
         return 2
     if args.check:
         if base is None:
@@ -99,6 +101,8 @@ def _with_dirs(site: SiteConfig, args: argparse.Namespace) -> SiteConfig:
 
 def _with_sim(base: SiteConfig | None, sim: SiteConfig, args: argparse.Namespace) -> SiteConfig:
     """The simulator's devices; the rest (timers, policies, tables) from ``--site``."""
+    from reach_receiver.config.daemon import DaemonSettings
+
     site = sim if base is None else dataclasses.replace(
         base, devices=sim.devices, references=sim.references, simulation=sim.simulation,
         longitude_deg=sim.longitude_deg, latitude_deg=sim.latitude_deg, source=base.source,
@@ -160,6 +164,8 @@ def _serve(
     layer, the engine, astropy) is even imported: a front-end a crash left powered is
     safe within a second of the restart.
     """
+    from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
+
     dirs_state = site.daemon.state_directory()
     lock = HardwareLock(dirs_state, f"reachd ({site.source})")
     try:
@@ -202,6 +208,8 @@ def _serve(
 
 def _safe_first(site: SiteConfig) -> str:
     """Command the safe state through the Teensy alone; ``""`` or what went wrong."""
+    from reach_receiver.devices.teensy import Teensy
+
     teensy = site.devices.teensy
     try:
         state = Teensy.command_safe(teensy.port, teensy.timeout_s)
@@ -226,8 +234,10 @@ def seconds_since_start() -> float:
 
 def _check(site: SiteConfig, args: argparse.Namespace) -> int:
     """The installation's checks; the devices only when no daemon owns them."""
+    from reach_receiver.clock import SystemClock
     from reach_receiver.daemon import doctor
     from reach_receiver.daemon.doctor import Check, failed, format_checks, run_checks
+    from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
 
     site = _with_dirs(site, args)
     state, runtime = site.daemon.state_directory(), site.daemon.runtime_directory()

@@ -17,16 +17,12 @@ from pathlib import Path
 from types import FrameType
 
 from reach_receiver.errors import ReceiverError
-from reach_receiver.sim.effects import SimEffects
-from reach_receiver.sim.physics import PhysicsConfig
-from reach_receiver.sim.receiver import (
-    DEFAULT_COMPRESSION,
-    SimulatedReceiver,
-    SimulationSettings,
-    spectrum_period_for,
-)
 
 from .logs import add_version, configure_logging
+from .run import DEFAULT_COMPRESSION
+
+# The simulator (numpy, h5py, the engine) is imported once the arguments are read: --help
+# and --version answer without it.
 
 
 def _sim_parser() -> argparse.ArgumentParser:
@@ -71,6 +67,14 @@ def sim_main(argv: Sequence[str] | None = None) -> int:
     """``reach-sim``: serve the simulated receiver until interrupted."""
     args = _sim_parser().parse_args(argv)
     configure_logging(args.verbose)
+    from reach_receiver.sim.effects import SimEffects
+    from reach_receiver.sim.physics import PhysicsConfig
+    from reach_receiver.sim.receiver import (
+        SimulatedReceiver,
+        SimulationSettings,
+        spectrum_period_for,
+    )
+
     period = args.spectrum_period or spectrum_period_for(args.compression)
     settings = SimulationSettings(
         compression=args.compression,

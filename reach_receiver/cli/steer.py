@@ -13,7 +13,7 @@ import argparse
 import sys
 from typing import Any
 
-from reach_receiver.config.site import find_site, load_site
+from reach_receiver.config.site import find_site, load_daemon_settings
 from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
 from reach_receiver.daemon.protocol import Closed, ControlError
 from reach_receiver.errors import ReceiverError
@@ -22,11 +22,11 @@ from reach_receiver.errors import ReceiverError
 def steer(op: str, args: argparse.Namespace) -> int:
     """Find the daemon from the site file and send it ``op``; exit 0, 1 or 2."""
     try:
-        site = load_site(find_site(args.site))
+        daemon = load_daemon_settings(find_site(args.site))
     except ReceiverError as err:
         print(f"reach-run {op}: {err}", file=sys.stderr)
         return 2
-    path = socket_path(site.daemon.runtime_directory())
+    path = socket_path(daemon.runtime_directory())
     if not daemon_answers(path):
         print(f"reach-run {op}: no daemon answers at {path}", file=sys.stderr)
         return 1

@@ -418,6 +418,30 @@ def load_site(path: str | Path) -> SiteConfig:
     return parse_site(document, str(path))
 
 
+def load_daemon_settings(path: str | Path) -> DaemonSettings:
+    """Only the ``daemon`` section of a site file: where a client finds ``reachd``.
+
+    A client of the daemon (``reach-run status``) needs its directories, not the checks
+    of the Touchstone references, which load numpy. Raises :class:`SiteError` as
+    :func:`load_site` does for what it reads.
+    """
+    path = Path(path)
+    try:
+        text = _read_bounded(path)
+    except (OSError, UnicodeDecodeError) as err:
+        message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
+        raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
+    document, problems = load_yaml(text, str(path))
+    document = with_lines(document)
+    if problems or not isinstance(document, LineDict):
+        raise SiteError(problems or [Problem(str(path), 1, "<document>", "not a mapping")])
+    reader = _Reader(document, str(path))
+    daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), str(path), reader.problems)
+    if reader.problems:
+        raise SiteError(sorted(dict.fromkeys(reader.problems), key=lambda p: p.line))
+    return daemon
+
+
 def _read_bounded(path: Path) -> str:
     """The text of a regular file of at most :data:`MAX_SITE_BYTES` (else ``OSError``).
 

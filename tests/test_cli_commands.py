@@ -1,0 +1,120 @@
+"""``reach-run``'s command words, run as the installed command is: a process of its own.
+
+The words, their own ``--help`` with exit codes, a typo named with the closest word,
+bare ``reach-run`` as usage, ``--version`` everywhere, ``--json`` that parses, shell
+completion that bash accepts, ``recover`` of a killed run's parts, and ``status``
+against a real ``reachd --sim`` as a summary within 80 columns.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from reach_receiver.cli.commands import COMMANDS
+
+ROOT = Path(__file__).resolve().parents[1]
+ENTRY = "from reach_receiver.cli import {main}; import sys; sys.exit({main}(sys.argv[1:]))"
+
+
+def cli(*args: str, main: str = "run_main", cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", ENTRY.format(main=main), *args],
+        capture_output=True, text=True, timeout=120, cwd=cwd,
+    )
+
+
+def test_bare_reach_run_prints_its_usage_and_exits_2():
+    done = cli()
+    assert done.returncode == 2
+    for word in COMMANDS:
+        assert f"  {word} " in done.stderr
+    assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(("typo", "hint"), [("stauts", "did you mean 'status'?"),
+                                            ("metrcis", "did you mean 'metrics'?"),
+                                            ("doctor", "see reach-run --help")])
+def test_an_unknown_word_is_named_not_taken_for_a_schedule(typo, hint):
+    done = cli(typo)
+    assert done.returncode == 2
+    assert done.stderr.strip() == f"reach-run: unknown command {typo!r}; {hint}"
+
+
+@pytest.mark.parametrize("word", [w for w in COMMANDS if w != "run"])
+def test_each_command_has_its_own_help_with_exit_codes_and_a_version(word):
+    done = cli(word, "--help")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"usage: reach-run {word}")
+    assert "exit codes: 0 " in done.stdout
+    assert max(map(len, done.stdout.splitlines())) <= 80
+    version = cli(word, "--version")
+    assert version.returncode == 0 and version.stdout.startswith(f"reach-run {word} ")
+
+
+def test_run_help_and_versions_of_every_command():
+    done = cli("run", "--help")
+    assert done.returncode == 0 and "usage: reach-run run" in done.stdout
+    assert "exit codes: 0 the run completed" in done.stdout
+    for main in ("run_main", "reachd_main", "sim_main"):
+        assert cli("--version", main=main).stdout.split()[1:] == cli("--version").stdout.split()[1:]
+    cal = subprocess.run([sys.executable, "-c", "from calibration.cli import main; import sys; "
+                          "sys.exit(main(sys.argv[1:]))", "--version"],
+                         capture_output=True, text=True, timeout=120)
+    assert cal.returncode == 0 and cal.stdout.startswith("reach-cal ")
+
+
+def test_check_validates_and_prints_json():
+    done = cli("check", "--sim", "--json", "schedules/quick.yaml")
+    assert done.returncode == 0, done.stderr
+    checked = json.loads(done.stdout)
+    assert checked["valid"] and checked["duration_s"] > 0
+    assert checked["steps"][0]["where"] == "schedules/quick.yaml:12"
+    bad = cli("check", "--sim", "schedules/nope.yaml")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
+
+
+def test_the_old_flags_still_work():
+    done = cli("--sim", "--validate", "schedules/quick.yaml")
+    assert done.returncode == 0 and "estimated duration" in done.stdout
+
+
+def test_reachd_refuses_a_site_out_in_a_missing_directory_before_it_starts():
+    started = time.monotonic()
+    done = cli("--sim", "--site-out", "/missing/dir/x.yaml", main="reachd_main")
+    assert done.returncode == 2
+    assert done.stderr.strip() == "reachd: --site-out /missing/dir/x.yaml: no directory /missing/dir"
+    assert time.monotonic() - started < 10  # no simulator was started
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash")
+def test_the_completion_script_completes_the_words_in_bash():
+    script = cli("completion", "bash").stdout
+    probe = script + '\nCOMP_WORDS=(reach-run sta); COMP_CWORD=1; _reach_run; echo "${COMPREPLY[@]}"'
+    probe += '\nCOMP_WORDS=(reach-run status --a); COMP_CWORD=2; _reach_run; echo "${COMPREPLY[@]}"'
+    out = subprocess.run(["bash", "-c", probe], capture_output=True, text=True, timeout=30)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == ["status", "--all"]
+
+
+def test_recover_merges_the_parts_of_a_killed_run(tmp_path):
+    from reach_receiver.store import RunStore, read_run_file
+
+    directory = tmp_path / "run"
+    # Opened and never finished: what a writer killed with SIGKILL leaves.
+    RunStore(directory, name="killed", schedule_files=[("s.yaml", "x: 1")], site_yaml="",
+             metadata={}, channel_width_hz=1e3).open()
+    assert not (directory / "run.h5").exists()
+    done = cli("recover", "--json", str(directory))
+    assert done.returncode == 0, done.stderr
+    answer = json.loads(done.stdout)
+    assert read_run_file(Path(answer["run_file"])).status == "interrupted"
+    again = cli("recover", str(directory))
+    assert again.returncode == 0 and "nothing to merge" in again.stdout
+    assert cli("recover", str(tmp_path)).returncode == 2
