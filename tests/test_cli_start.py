@@ -1,0 +1,69 @@
+"""The cheap commands start without the engine: numpy, astropy, matplotlib, calibration.
+
+Not a timing test (the machine's load decides the time); what decides the start is what
+a command imports, which is held here: each command runs in a fresh interpreter and its
+``sys.modules`` is read after it answered. ``python -m benchmarks.cli_start`` prints the
+times.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("numpy", "astropy", "matplotlib", "h5py", "scipy", "calibration")
+#: The engine's table of names the site file checks its solver against: no imports.
+LIGHT = ("calibration", "calibration.constants")
+PROBE = """\
+import contextlib, io, json, sys
+from {module} import {main}
+with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+    try:
+        code = {main}({argv!r})
+    except SystemExit as stop:
+        code = stop.code
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in {heavy!r} and m not in {light!r})
+print(json.dumps({{"code": code, "heavy": heavy}}))
+"""
+
+
+def imported(module: str, main: str, argv: list[str]) -> dict:
+    code = PROBE.format(module=module, main=main, argv=argv, heavy=HEAVY, light=LIGHT)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+@pytest.mark.parametrize(("main", "argv"), [
+    ("run_main", ["--version"]),
+    ("run_main", ["--help"]),
+    ("run_main", []),
+    ("run_main", ["stauts"]),
+    ("run_main", ["status", "--help"]),
+    ("run_main", ["metrics", "--help"]),
+    ("run_main", ["run", "--help"]),
+    ("run_main", ["completion", "bash"]),
+    ("reachd_main", ["--help"]),
+    ("reachd_main", ["--version"]),
+    ("sim_main", ["--help"]),
+])
+def test_help_and_version_import_nothing_heavy(main, argv):
+    found = imported("reach_receiver.cli", main, argv)
+    assert found["code"] in (0, 2, None)
+    assert found["heavy"] == []
+
+
+def test_status_against_a_site_with_references_imports_nothing_heavy(tmp_path):
+    """The site's Touchstone references are not read (numpy) to find the daemon."""
+    reference = tmp_path / "ref.s1p"
+    reference.write_text("# Hz S RI R 50\n1e6 0.1 0.0\n")
+    site = tmp_path / "site.yaml"
+    site.write_text(f"references: {{test_load: {reference}}}\n"
+                    f"daemon: {{runtime_dir: {tmp_path / 'run'}}}\n")
+    found = imported("reach_receiver.cli", "run_main", ["status", "--site", str(site)])
+    assert found["code"] == 1  # no daemon answers there
+    assert found["heavy"] == []

@@ -1,0 +1,86 @@
+"""What an operator reads in an 80x24 terminal: no line wider than 80 columns.
+
+The commands run inside a real tmux at 80x24; ``capture-pane -J`` joins the lines the
+terminal wrapped, so a line that did not fit shows as one longer than 80.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ENTRY = "import sys; from reach_receiver.cli import {main}; sys.exit({main}(sys.argv[1:]))"
+
+pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="needs tmux")
+
+
+def in_tmux(tmp_path: Path, *args: str, main: str = "run_main") -> list[str]:
+    """Run a command in a detached 80x24 tmux; its lines as the terminal showed them."""
+    tmp_path = Path(tempfile.mkdtemp(dir=tmp_path))  # one per command
+    socket = str(tmp_path / "tmux.sock")
+    done = tmp_path / "done"
+    command = shlex.join([sys.executable, "-c", ENTRY.format(main=main), *args])
+    script = f"cd {shlex.quote(str(ROOT))}; {command}; touch {shlex.quote(str(done))}; sleep 60"
+    tmux = ["tmux", "-S", socket, "-f", "/dev/null"]
+    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "", "LINES": ""}
+    subprocess.run([*tmux, "new-session", "-d", "-x", "80", "-y", "24", "sh", "-c", script],
+                   check=True, env=env, timeout=30)
+    try:
+        deadline = time.monotonic() + 60
+        while not done.exists():
+            assert time.monotonic() < deadline, "the command did not end"
+            time.sleep(0.1)
+        shown = subprocess.run([*tmux, "capture-pane", "-p", "-J", "-S", "-2000"],
+                               check=True, capture_output=True, text=True, timeout=30).stdout
+    finally:
+        subprocess.run([*tmux, "kill-server"], check=False, timeout=30)
+    return [line.rstrip() for line in shown.splitlines() if line.strip()]
+
+
+def test_the_dry_run_timeline_fits_80_columns(tmp_path):
+    lines = in_tmux(tmp_path, "--sim", "--dry-run", "schedules/observe.yaml")
+    assert any("total" in line for line in lines)
+    assert max(map(len, lines)) <= 80, max(lines, key=len)
+
+
+@pytest.fixture
+def reachd(tmp_path: Path) -> Iterator[Path]:
+    """A ``reachd --sim``; the site file that finds it."""
+    site = tmp_path / "site.yaml"
+    process = subprocess.Popen(
+        [sys.executable, "-c", ENTRY.format(main="reachd_main"), "--sim", "--state-dir",
+         str(tmp_path / "state"), "--runtime-dir", str(tmp_path / "run"), "--site-out",
+         str(site)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not ((tmp_path / "run" / "control.sock").exists() and site.exists()):
+            assert process.poll() is None, "reachd --sim exited"
+            assert time.monotonic() < deadline, "reachd did not start"
+            time.sleep(0.1)
+        yield site
+    finally:
+        process.terminate()
+        process.wait(30)
+
+
+def test_status_is_a_summary_within_80_columns(tmp_path, reachd):
+    lines = in_tmux(tmp_path, "status", "--site", str(reachd))
+    assert lines[0].startswith("state:     idle")
+    assert any(line.startswith("devices:   ") and "teensy up" in line for line in lines)
+    assert any(line.startswith("last calibration: ") for line in lines)
+    assert len(lines) <= 24
+    assert max(map(len, lines)) <= 80, max(lines, key=len)
+    every = in_tmux(tmp_path, "status", "--all", "--site", str(reachd))
+    assert len(every) > len(lines)
+    assert max(map(len, every)) <= 80, max(every, key=len)
