@@ -119,7 +119,8 @@ class Daemon(ControlRequests):
             self.page = StatusPage(site.daemon.status_port, self._status_reply, directories.runs,
                                    lambda: self.monitor.database, clock.now,
                                    lambda: [{**j.public(), "result": j.result}
-                                            for j in self.queue.jobs()])
+                                            for j in self.queue.jobs()],
+                                   self.monitor.settings.alarms)
         self.paused = False
         self.current = None
         self.session = None

@@ -20,13 +20,14 @@ nothing to show yet:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from calibration.figures import noise_wave_parameters, temperatures
+from calibration.figures import noise_wave_parameters
 from calibration.figures.reflections import SMITH_SPACE, smith_grid
 from calibration.figures.style import (
     NEUTRAL,
@@ -39,16 +40,17 @@ from calibration.figures.style import (
     mhz,
     new_figure,
     note,
-    source_styles,
     styled,
     suptitle,
 )
 from calibration.noise_waves import q_from_powers
-from calibration.run_records import TemperatureLog
+from reach_receiver.config.monitoring import AlarmRule
 from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor.database import MetricsDatabase
 from reach_receiver.monitor.readings import parse_key
 from reach_receiver.store import RUN_FILE, Measurement, RunContents, read_run_file
+
+from .status_panels import DASHES, OKABE_ITO, temperature_panels
 
 __all__ = [
     "CAPTIONS",
@@ -147,26 +149,44 @@ def s11s(runs: Path) -> Figure:
         return _empty("no S11 measured yet")
     contents, found = newest
     latest = {m.name: m for m in found}  # in order: the last of each name wins
-    styles = source_styles(latest)
-    fig = new_figure(5.0)
-    spec = grid(fig, 1, 2, SMITH_SPACE, width_ratios=(1, 1.25))
-    smith, db = fig.add_subplot(spec[0, 0]), fig.add_subplot(spec[0, 1])
+    styles: dict[str, dict[str, Any]] = {
+        name: {"color": OKABE_ITO[i % len(OKABE_ITO)], "ls": DASHES[i // len(OKABE_ITO) % 3]}
+        for i, name in enumerate(latest)
+    }
+    fig = new_figure(6.4)
+    spec = grid(fig, 2, 2, SMITH_SPACE, width_ratios=(1, 1.25))
+    smith = fig.add_subplot(spec[:, 0])
+    db = fig.add_subplot(spec[0, 1])
+    phase = fig.add_subplot(spec[1, 1], sharex=db)
     smith_grid(smith)
     for name, measurement in latest.items():
         arrays = contents.read(measurement)
         gamma = np.asarray(arrays["s11"], dtype=complex)
         x = mhz(np.asarray(arrays["frequencies"], dtype=float))
-        smith.plot(gamma.real, gamma.imag, lw=1.0, **styles[name])
+        smith.plot(*_thin(gamma.real, gamma.imag), lw=1.0, **styles[name])
         level = 20 * np.log10(np.maximum(np.abs(gamma), 1e-12))
         db.plot(*envelope(x, level, WIDTH_PX // 2), label=name, **styles[name])
-    db.set_xlabel("frequency (MHz)")
+        degrees = np.degrees(np.unwrap(np.angle(gamma)))
+        phase.plot(*envelope(x, degrees, WIDTH_PX // 2), **styles[name])
+    phase.set_xlabel("frequency (MHz)")
     db.set_ylabel("|Γ| (dB)")
+    phase.set_ylabel("phase of Γ (°, unwrapped)")
     smith.set_title("Smith chart")
-    db.set_title("reflection magnitude")
+    db.set_title("reflection magnitude and phase")
     legend_right(fig, spec, *db.get_legend_handles_labels())
     last = max(m.timestamp for m in latest.values())
     suptitle(fig, f"Latest S11s: run {contents.name}, to {_stamp(last)}")
     return fig
+
+
+def _thin(x: np.ndarray, y: np.ndarray, points: int = WIDTH_PX) -> tuple[np.ndarray, np.ndarray]:
+    """Every n-th point of a curve, at most about ``points`` of them.
+
+    A Smith chart's curve is smooth at that density; all of a VNA's points would only
+    make the image larger.
+    """
+    step = max(1, len(x) // points)
+    return x[::step], y[::step]
 
 
 def _label(key: str) -> str:
@@ -178,44 +198,25 @@ def _label(key: str) -> str:
     return " ".join([short, *labels.values()])
 
 
-def temperature_log(database: MetricsDatabase, now: float, span_s: float = DAY_S) -> TemperatureLog:
-    """Every temperature series since ``now - span_s`` on one time axis.
+@styled
+def temperatures_last_day(
+    database: MetricsDatabase | None, now: float, rules: Sequence[AlarmRule] = ()
+) -> Figure:
+    """The metrics database's temperatures over the last day on a UTC clock.
 
-    The devices of one sample are read at slightly different times, so the series are
-    interpolated onto the times of the one with the most readings (a reading that is NaN,
-    a flagged thermocouple, stays a gap).
+    The thresholds of ``rules`` (the site's alarms) are drawn (:mod:`.status_panels`).
     """
+    if database is None:
+        return _empty("the metrics database is not open")
     known = database.keys()
     keys = [
         k for k in known
         if database.unit(k) == TEMPERATURE_UNIT and "setpoint" not in parse_key(k)[0]
     ]
-    series = {k: database.series(k, now - span_s, now) for k in keys}
-    series = {k: points for k, points in series.items() if points}
-    if not series:
-        return TemperatureLog(np.zeros(0), np.zeros((0, 0)), ())
-    times = np.array([p.t for p in max(series.values(), key=len)], dtype=float)
-    columns = [
-        np.interp(times, [p.t for p in points], [p.value for p in points])
-        for points in series.values()
-    ]
-    return TemperatureLog(times, np.stack(columns, axis=1), tuple(_label(k) for k in series))
-
-
-def temperatures_last_day(database: MetricsDatabase | None, now: float) -> Figure:
-    """The metrics database's temperatures over the last day (one panel per series)."""
-    if database is None:
-        return styled(_empty)("the metrics database is not open")
-    log = temperature_log(database, now)
-    if log.timestamps_s.size == 0:
-        return styled(_empty)("no temperature in the metrics database over the last day")
-    fig = temperatures(log)
-    hours = (log.timestamps_s[-1] - log.timestamps_s[0]) / 3600.0
-    suptitle(
-        fig,
-        f"Temperatures over the last day (metrics database, {hours:.1f} h of readings, "
-        f"to {_stamp(float(log.timestamps_s[-1]))})",
-    )
+    fig = temperature_panels(database, keys, now, DAY_S, rules)
+    if fig is None:
+        return _empty("no temperature in the metrics database over the last day")
+    suptitle(fig, f"Temperatures over the last day (metrics database, to {_stamp(now)})")
     return fig
 
 
@@ -230,12 +231,14 @@ def current_solution(runs: Path) -> Figure:
     return fig
 
 
-#: The page's figures by name, each built from the runs directory and the database.
-FIGURES: dict[str, Callable[[Path, MetricsDatabase | None, float], Figure]] = {
-    "spectra": lambda runs, db, now: dicke_spectra(runs),
-    "s11": lambda runs, db, now: s11s(runs),
-    "temperatures": lambda runs, db, now: temperatures_last_day(db, now),
-    "solution": lambda runs, db, now: current_solution(runs),
+#: The page's figures by name, each built from the runs directory, the database, the
+#: daemon's clock and the site's alarm rules.
+FIGURES: dict[str, Callable[[Path, MetricsDatabase | None, float, Sequence[AlarmRule]],
+                            Figure]] = {
+    "spectra": lambda runs, db, now, rules: dicke_spectra(runs),
+    "s11": lambda runs, db, now, rules: s11s(runs),
+    "temperatures": lambda runs, db, now, rules: temperatures_last_day(db, now, rules),
+    "solution": lambda runs, db, now, rules: current_solution(runs),
 }
 
 
@@ -268,7 +271,7 @@ def data_version(name: str, runs: Path, database: MetricsDatabase | None) -> str
         wal = database.path.with_name(database.path.name + "-wal")
         return repr((_stat(database.path), _stat(wal)))
     directories = sorted((p for p in runs.glob("*") if p.is_dir()), reverse=True)
-    seen = []
+    seen: list[object] = []
     for directory in directories[:RUNS_SEARCHED]:
         seen.append((directory.name, _stat(directory / RUN_FILE)))
         parts = directory / "parts"

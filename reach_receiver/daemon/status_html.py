@@ -31,10 +31,10 @@ h1 { font-size: 1.3em; margin: 0.2em 0; } h2 { font-size: 1.1em; margin: 0.8em 0
 table { border-collapse: collapse; margin: 0.3em 0; }
 th, td { text-align: left; padding: 0.1em 0.7em 0.1em 0; vertical-align: top; }
 .state { font-weight: bold; font-size: 1.15em; }
-.alarms li { color: #b00; } .alarms small { color: #555; }
+.alarms li { color: #b00; } .alarms small { color: #555; overflow-wrap: anywhere; }
 .ok { color: #070; } .failed, .aborted { color: #b00; } .cancelled { color: #a60; }
 tr.warn td { color: #a60; } tr.error td { color: #b00; }
-pre { white-space: pre-wrap; margin: 0.2em 0; font-size: 0.9em; }
+pre { white-space: pre-wrap; overflow-wrap: anywhere; margin: 0.2em 0; font-size: 0.9em; }
 figure { margin: 1em 0; } img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 """
 

@@ -46,6 +46,7 @@ from io import BytesIO
 from pathlib import Path
 from typing import Any
 
+from reach_receiver.config.monitoring import AlarmRule
 from reach_receiver.monitor.database import MetricsDatabase
 
 from .status_html import REFRESH_S, render_page
@@ -132,7 +133,7 @@ class FigureCache:
             future = self._drawing.get((name, tag))
             if future is None:
                 future = self._drawing[(name, tag)] = self._pool.submit(self._draw, name, tag)
-        return future.result(timeout=RENDER_TIMEOUT_S)  # type: ignore[no-any-return]
+        return future.result(timeout=RENDER_TIMEOUT_S)
 
     def _draw(self, name: str, tag: str) -> Body:
         try:
@@ -274,6 +275,8 @@ class StatusPage:
     jobs
         The daemon's jobs, oldest first, as the protocol shows them with their
         ``result`` lines (for the recent jobs and the last calibration).
+    rules
+        The site's alarm rules, whose thresholds the temperature panels draw.
     """
 
     def __init__(
@@ -284,12 +287,14 @@ class StatusPage:
         database: Callable[[], MetricsDatabase | None],
         now: Callable[[], float] = time.time,
         jobs: Callable[[], Sequence[Mapping[str, Any]]] = list,
+        rules: Sequence[AlarmRule] = (),
     ) -> None:
         from . import status_figures  # matplotlib: only for a daemon that serves the page
 
         self.port, self.status, self.runs, self.database, self.now, self.jobs = (
             port, status, runs, database, now, jobs
         )
+        self.rules = tuple(rules)
         self._figures = status_figures
         self._builders = status_figures.FIGURES
         self.figures = FigureCache(self._render, self._version, tuple(self._builders))
@@ -303,7 +308,7 @@ class StatusPage:
     def _render(self, name: str) -> tuple[str, bytes]:
         from calibration.figures.style import DPI
 
-        fig = self._builders[name](self.runs, self.database(), self.now())
+        fig = self._builders[name](self.runs, self.database(), self.now(), self.rules)
         return smallest_image(fig, DPI)
 
     def last_spectrum(self) -> float | None:
