@@ -156,6 +156,30 @@ def measure(url: str, reloads: int, interval_s: float) -> dict[str, list[int]]:
     return loads
 
 
+def formats(state: Path) -> None:
+    """Each figure of the run just made drawn both ways: the palette PNG and the SVG."""
+    from calibration.figures.style import DPI
+    from reach_receiver.daemon.status_figures import FIGURES
+    from reach_receiver.daemon.status_page import image_formats
+    from reach_receiver.monitor.database import MetricsDatabase
+
+    path = state / "metrics.sqlite"
+    database = MetricsDatabase(path) if path.exists() else None
+    print("each figure both ways (as sent: PNG as is, SVG gzipped; the page sends the smaller):")
+    try:
+        keys = database.keys() if database is not None else []
+        last = [p.t for k in keys for p in database.series(k, 0, 4e9)[-1:]] if database else []
+        now = max(last, default=time.time())  # the daemon's clock (a simulator's runs fast)
+        for name, build in FIGURES.items():
+            sizes = image_formats(build(state / "runs", database, now, ()), DPI)
+            print(f"  {name:13s} PNG {sizes['image/png'][1] / 1e3:6.1f} kB, "
+                  f"SVG {sizes['image/svg+xml'][1] / 1e3:6.1f} kB "
+                  f"({len(sizes['image/svg+xml'][0]) / 1e3:.0f} kB before gzip)")
+    finally:
+        if database is not None:
+            database.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.status_page_bytes")
     parser.add_argument("--reloads", type=int, default=RELOADS)
@@ -172,6 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             process.send_signal(signal.SIGTERM)
             process.wait(timeout=60)
+        formats(tmp / "state")
     ok = True
     for name, sizes in loads.items():
         steady = sizes[1:] or [0]

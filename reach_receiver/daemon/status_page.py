@@ -156,8 +156,15 @@ def smallest_image(figure: Any, dpi: float) -> tuple[str, bytes]:
     """``figure`` as SVG or as a palette PNG, whichever is smaller as sent (SVG gzipped).
 
     Dense lines are decimated to the figure's pixel width by the builders, so an SVG
-    is usually the smaller; a figure of many markers or filled areas may not be.
+    is often the smaller; a figure of many curves or filled areas may not be.
     """
+    both = image_formats(figure, dpi)
+    kind = min(both, key=lambda k: both[k][1])
+    return kind, both[kind][0]
+
+
+def image_formats(figure: Any, dpi: float) -> dict[str, tuple[bytes, int]]:
+    """``figure`` as a palette PNG and as SVG: each one's bytes and its size as sent."""
     from matplotlib import rc_context
     from PIL import Image
 
@@ -169,9 +176,10 @@ def smallest_image(figure: Any, dpi: float) -> tuple[str, bytes]:
     svg = BytesIO()
     with rc_context({"svg.fonttype": "none", "svg.hashsalt": "reach-status"}):
         figure.savefig(svg, format="svg", dpi=dpi, metadata={"Date": None})
-    if len(gzip.compress(svg.getvalue(), 6)) < len(png.getvalue()):
-        return "image/svg+xml", svg.getvalue()
-    return "image/png", png.getvalue()
+    return {
+        "image/png": (png.getvalue(), len(png.getvalue())),
+        "image/svg+xml": (svg.getvalue(), len(gzip.compress(svg.getvalue(), 6))),
+    }
 
 
 class _Handler(BaseHTTPRequestHandler):
