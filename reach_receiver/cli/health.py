@@ -117,8 +117,9 @@ def format_health(health: Mapping[str, Any] | None, now: float | None = None) ->
         age = now - float(r["t"])
         if age > 2 * cadence:
             flags += f"  ({age:.0f} s old)"
-        text = text if len(text) <= 50 else text[:47] + "..."
-        lines.append(f"{text:<50} {_value(r['value'], str(r['unit'])):>12}{flags}")
+        # Within 80 columns: name 44, value 9, "[unknown]" and "(86400 s old)".
+        text = text if len(text) <= 44 else text[:41] + "..."
+        lines.append(f"{text:<44} {_value(r['value'], str(r['unit'])):>9}{flags}")
     return lines
 
 

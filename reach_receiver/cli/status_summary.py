@@ -8,6 +8,7 @@ the last calibration (the daemon's ``solutions`` request) and the link of every 
 from __future__ import annotations
 
 import re
+import textwrap
 import time
 from collections.abc import Mapping
 from datetime import datetime, timezone
@@ -21,10 +22,11 @@ def _ago(t: float | None, now: float) -> str:
     if t is None:
         return ""
     stamp = datetime.fromtimestamp(float(t), tz=timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    return f"{stamp} ({_duration(now - float(t))} ago)"
+    return f"{stamp} ({duration(now - float(t))} ago)"
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
+    """A span as an operator reads it: ``45 s``, ``12 min``, ``3.4 h``, ``2.0 d``."""
     seconds = max(0.0, seconds)
     if seconds < 120:
         return f"{seconds:.0f} s"
@@ -40,9 +42,14 @@ def _fit(line: str) -> str:
 
 
 def summary_lines(reply: Mapping[str, Any], now: float | None = None) -> list[str]:
-    """The summary of a ``status`` reply (with ``last_calibration`` added by the client)."""
-    now = time.time() if now is None else now
-    since = _ago(reply.get("since"), now)
+    """The summary of a ``status`` reply (with ``last_calibration`` added by the client).
+
+    The state's change is told against the wall clock, the last calibration against the
+    daemon's own clock (``now`` in the reply), which for a simulated receiver runs faster.
+    """
+    wall = time.time() if now is None else now
+    now = float(reply.get("now") or wall) if now is None else now
+    since = _ago(reply.get("since"), wall)  # the state machine's times are the wall clock
     lines = [f"state:     {reply.get('state', '?')}" + (f" since {since}" if since else "")]
     job = reply.get("job")
     if job:
@@ -50,7 +57,7 @@ def summary_lines(reply: Mapping[str, Any], now: float | None = None) -> list[st
         if reply.get("step"):
             lines.append(f"step:      {reply['step']}")
         if reply.get("left_s") is not None:
-            lines.append(f"time left: {_duration(float(reply['left_s']))}")
+            lines.append(f"time left: {duration(float(reply['left_s']))}")
     else:
         lines.append("job:       none")
     queue = reply.get("queue") or []
@@ -75,5 +82,6 @@ def summary_lines(reply: Mapping[str, Any], now: float | None = None) -> list[st
             value = reading.get("value")
             link = "up" if value == 1 else ("down" if value == 0 else "unknown")
             devices.append(f"{match.group(1)} {link}")
-    lines.append("devices:   " + (", ".join(devices) if devices else "no readings"))
+    text = ", ".join(devices) if devices else "no readings"
+    lines += textwrap.wrap(text, WIDTH, initial_indent="devices:   ", subsequent_indent=" " * 11)
     return [_fit(line) for line in lines]

@@ -87,7 +87,7 @@ def _print_status(answer: dict[str, Any], every: bool) -> None:
         print(f"queued: {', '.join(map(str, answer['queue']))}")
     for name, at in sorted(answer.get("timers", {}).items()):
         print(f"timer {name}: next at {at:.0f} (Unix s)")
-    for line in format_health(answer.get("health")):
+    for line in format_health(answer.get("health"), answer.get("now")):
         print(line)
 
 

@@ -78,6 +78,7 @@ class ControlRequests(JobRunning):
         changes = self.machine.history
         return reply(
             state=self.machine.state,
+            now=self.clock.now(),  # the daemon's clock (a simulator's runs compressed)
             since=changes[-1].at if changes else None,
             job=self.current.public() if self.current else None,
             step=self.progress.step_text if self.progress else None,
