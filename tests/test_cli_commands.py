@@ -155,3 +155,10 @@ def test_the_status_summary_of_a_busy_daemon_fits_80_columns():
     assert "last calibration: 2027-01-12 08:00 UTC (3.0 d ago)" in lines
     shown = " ".join(line for line in lines if line.startswith(("devices:", "    ")))
     assert all(f"{d} up" in shown for d in devices)
+
+
+def test_the_commands_default_compression_is_the_simulators():
+    from reach_receiver.cli.run import DEFAULT_COMPRESSION
+    from reach_receiver.sim.receiver import DEFAULT_COMPRESSION as SIMULATOR
+
+    assert DEFAULT_COMPRESSION == SIMULATOR

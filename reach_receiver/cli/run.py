@@ -38,13 +38,10 @@ from .logs import add_version, configure_logging
 # The engine, the run layer and the simulator are imported when a schedule is checked or
 # run, not for ``--help``: they cost about a second before anything is printed.
 if TYPE_CHECKING:
-    from calibration.per_frequency import ChannelSolution
-    from calibration.solvers import AnySolution
     from reach_receiver.clock import Clock
     from reach_receiver.config.site import SiteConfig
     from reach_receiver.run.context import Progress
-    from reach_receiver.run.session import RunSession, RunSummary
-    from reach_receiver.run.steps.calibrate import CalibrationOutcome
+    from reach_receiver.run.session import RunSession
     from reach_receiver.sim.receiver import SimulatedReceiver
 
 #: Simulated seconds per real second of ``--sim`` (the simulator's ``DEFAULT_COMPRESSION``;
@@ -246,10 +243,12 @@ def _run(args: argparse.Namespace) -> int:
         except (ReceiverError, OSError) as err:  # the run directory could not be made
             print(f"reach-run: the run did not start: {err}", file=sys.stderr)
             return 1
-        _print_summary(summary, sim)
-        if summary.calibration is not None and session.report:
-            written = summary.report
-            print(f"report: {written}" if written else "report: not written (see the log)")
+        # The same lines a followed job and run.log show (reach_receiver.run.summary).
+        from reach_receiver.run.summary import report_line, summary_lines
+
+        print("\n".join(summary_lines(summary, sim.physics if sim is not None else None)))
+        if session.report and report_line(summary):
+            print(report_line(summary))
     return 0
 
 
@@ -339,113 +338,3 @@ def _stopping_on_signals(session: RunSession) -> Iterator[None]:
     finally:
         for handled, handler in previous.items():
             signal.signal(handled, handler)
-
-
-def _print_solution(solution: AnySolution) -> None:
-    """The solution's lines of the summary: its orders, or what a per-channel one has."""
-    from calibration.identifiability import caution_lines
-    from calibration.per_frequency import ChannelSolution
-    from calibration.solvers import method_name
-
-    if isinstance(solution, ChannelSolution):
-        numbers = solution.summary()
-        print(
-            f"solution: {method_name(solution)}, per channel ({numbers['n_channels']} channels, "
-            f"{len(solution.calibrators)} calibrators; uncorrelated errors between channels)"
-        )
-        if numbers["log_evidence"] is not None:
-            print(f"  log evidence (sum over channels, eq. 4.22): {numbers['log_evidence']:.3f}")
-        return
-    print(f"solution: orders {solution.best_orders} (T_unc, T_cos, T_sin, T_NS, T_L)")
-    if solution.models_line():
-        print(f"  averaged over models (orders, weight): {solution.models_line()}")
-    for line in caution_lines(solution):
-        print(f"  {line}")
-    print(f"  noise scale s^2 {solution.posterior.noise_variance:.3f} (1 = radiometer equation)")
-
-
-def _print_summary(summary: RunSummary, sim: SimulatedReceiver | None) -> None:
-    from calibration.identifiability import model_choice_line
-    from calibration.per_frequency import ChannelSolution
-    from reach_receiver.schedule.timing import hms
-    from reach_receiver.store.corrections import corrections_line
-
-    print(f"run file: {summary.run_file}")
-    print(f"simulated/real time of the run: {hms(summary.elapsed_s)}")
-    for check in summary.checks:
-        print(f"check {check.name}: {'PASS' if check.passed else 'FAIL'} ({check.detail})")
-    outcome = summary.calibration
-    if outcome is None:
-        return
-    solution, handover = outcome.solution, outcome.handover
-    cycles = sum(len(v) for v in handover.cycles.values())
-    print(
-        f"hand-over: {handover.band_hz[0] / 1e6:g}-{handover.band_hz[1] / 1e6:g} MHz, "
-        f"{len(handover.calibrators)} calibrators, {cycles} Dicke cycles, "
-        f"{len(handover.s11)} S11s (recorded in the run file)"
-    )
-    if corrections_line(handover.corrections):
-        print(f"  corrections: {corrections_line(handover.corrections)}")
-    _print_solution(solution)
-    floor, predicted = outcome.floor_k, outcome.predicted_k
-    print(
-        f"  on {outcome.validation.name!r}: noise floor {1e3 * floor:.3f} mK, predicted "
-        f"calibration std {1e3 * predicted:.3f} mK, distance to floor {predicted / floor:.3f}"
-    )
-    choice = model_choice_line(outcome.model_choice_share, outcome.validation.name)
-    if choice:
-        print(f"  {choice}")
-    if outcome.systematics is not None and outcome.systematic_k is not None:
-        # The median beside the RMS: one channel where the calibrators' reflections line up
-        # can hold most of the RMS.
-        import numpy as np
-
-        median = float(np.median(outcome.systematics.std_k(outcome.validation.name)))
-        print(
-            f"  VNA systematic on {outcome.validation.name!r}: {1e3 * outcome.systematic_k:.3f} "
-            f"mK RMS, median {1e3 * median:.3f} mK ({outcome.systematics.describe()})"
-        )
-    if sim is not None:
-        actual = sim.physics.calibration_error_k(solution, outcome.data, outcome.validation)
-        print(
-            f"  actual calibration error against the simulator's truth: "
-            f"{1e3 * actual:.3f} mK = {actual / floor:.3f} x floor"
-        )
-        if isinstance(solution, ChannelSolution):
-            _print_per_channel_errors(solution, outcome, sim)
-
-
-def _print_per_channel_errors(
-    solution: ChannelSolution, outcome: CalibrationOutcome, sim: SimulatedReceiver
-) -> None:
-    """Each channel's error in units of its own floor, for a per-channel solution.
-
-    Where the calibrators' reflections line up (all real at one frequency, so T_cos and
-    T_sin cannot be told apart there), a channel's floor is hundreds of times the band's
-    median, and that one channel decides both RMS values of the line above. The RMS of
-    error / floor over the channels weighs each channel once; it is taken over the
-    channels whose floor is within 10x the median, and the others' largest is shown
-    apart: there the floor, a first-order error, is not the error's size (one such
-    channel once took the RMS over 1229 channels from 1.02 to 1.17). The largest ratio
-    among the channels counted is shown with its frequency: about 3-4 over a thousand
-    channels of Gaussian errors, far more where one channel alone moves the RMS.
-    """
-    import numpy as np
-
-    data, source = outcome.data, outcome.validation
-    errors = sim.physics.calibration_errors_k(solution, data, source)
-    floor = outcome.floor_std_k
-    ratio = np.abs(errors / floor)
-    degenerate = floor > 10 * np.median(floor)
-    rms = float(np.sqrt(np.mean(ratio[~degenerate] ** 2)))
-    worst = int(np.argmax(np.where(degenerate, -np.inf, ratio)))
-    line = (
-        f"  per channel: RMS of error / floor {rms:.3f} over {int(np.sum(~degenerate))} channels"
-        f" (largest {ratio[worst]:.2f} at {data.freq_hz[worst] / 1e6:.3f} MHz)"
-    )
-    if np.any(degenerate):
-        line += (
-            f"; {int(np.sum(degenerate))} with a floor over 10x the median, largest error / "
-            f"floor {float(np.max(ratio[degenerate])):.3f}"
-        )
-    print(line)
