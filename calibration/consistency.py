@@ -70,6 +70,7 @@ from numpy.typing import NDArray
 from scipy import stats
 from scipy.linalg import cho_factor, cho_solve
 
+from .constants import DEFAULT_ALPHA
 from .data import CalibrationData
 from .errors import CalibrationError, InvalidDataError
 from .noise_waves import INDEX, design_terms, model_q
@@ -89,7 +90,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Solve = Callable[[CalibrationData], AnySolution]
-DEFAULT_ALPHA = 0.01
 DEFAULT_OFFSET_SD_K = 10.0
 
 

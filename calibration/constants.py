@@ -13,3 +13,24 @@ PER_CHANNEL_METHODS = ("least-squares", "bayesian")
 
 #: iTPM channelisation: 400 MSPS sampled, 32768-point FFT.
 ITPM_CHANNEL_WIDTH_HZ = 400e6 / 32768
+
+#: The five noise-wave parameters, in the engine's order (thesis eq. 3.27): the
+#: uncorrelated, cosine and sine noise waves, the noise source and the load.
+PARAMETER_NAMES: tuple[str, ...] = ("unc", "cos", "sin", "NS", "L")
+
+#: The most polynomial terms the order search gives one parameter
+#: (:class:`calibration.model_fit.OrderChoice`'s ``ceiling``; a test holds them equal).
+ORDER_CEILING = 16
+
+#: The twelve REACH calibrators (thesis table A.2), REACH names.
+REACH_CALIBRATORS: tuple[str, ...] = (
+    "cold", "hot", "r25", "r100", "c2r27", "c2r36", "c2r69", "c2r91",
+    "c10open", "c10short", "c10r10", "c10r250",
+)
+
+#: Correlation length of the VNA's systematic error over frequency
+#: (:mod:`calibration.vna_systematics`).
+DEFAULT_CORRELATION_HZ = 5e6
+
+#: False-alarm rate of the calibrator consistency test (:mod:`calibration.consistency`).
+DEFAULT_ALPHA = 0.01

@@ -26,11 +26,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .constants import PARAMETER_NAMES
+
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
 #: The five noise-wave parameters, in the order used by every array in this package.
-PARAMETERS: tuple[str, ...] = ("unc", "cos", "sin", "NS", "L")
+PARAMETERS: tuple[str, ...] = PARAMETER_NAMES
 N_PARAMETERS = len(PARAMETERS)
 #: Index of each parameter in :data:`PARAMETERS`.
 INDEX = {name: i for i, name in enumerate(PARAMETERS)}

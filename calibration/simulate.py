@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
 from .basis import BasisKind, PolynomialBasis
-from .constants import ITPM_CHANNEL_WIDTH_HZ
+from .constants import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
 from .data import CalibrationData, Integration, SourceData
 from .noise_waves import dicke_powers
 from .polynomial_model import PolynomialParameters
@@ -36,22 +36,6 @@ from .reflections import lna_reflection, reach_source_reflection
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
-
-#: The twelve REACH calibrators (thesis table A.2), REACH names.
-REACH_CALIBRATORS: tuple[str, ...] = (
-    "cold",
-    "hot",
-    "r25",
-    "r100",
-    "c2r27",
-    "c2r36",
-    "c2r69",
-    "c2r91",
-    "c10open",
-    "c10short",
-    "c10r10",
-    "c10r250",
-)
 
 #: Noise-diode excess noise ratio, Noisecom NC346A (thesis table 2.1), MHz -> dB.
 NC346A_ENR_DB = {

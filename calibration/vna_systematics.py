@@ -41,6 +41,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from .constants import DEFAULT_CORRELATION_HZ
 from .data import CalibrationData, SourceData
 from .errors import InvalidDataError
 from .measurement_uncertainty import VnaAccuracy, sample_reflections
@@ -54,8 +55,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Correlation length of the VNA's systematic error over frequency (module docstring).
-DEFAULT_CORRELATION_HZ = 5e6
 
 
 class Calibrates(Protocol):

@@ -57,6 +57,27 @@ def test_help_and_version_import_nothing_heavy(main, argv):
     assert found["heavy"] == []
 
 
+#: reach-cal's parsers: the package, its constants and errors, and the cli's parser modules.
+CAL_PARSER = ("calibration.errors", "calibration.cli", "calibration.cli.main",
+              "calibration.cli.args", "calibration.cli.import_parser")
+
+
+@pytest.mark.parametrize("argv", [
+    ["--help"], ["--version"], [], ["solve", "--help"], ["simulate", "--help"],
+    ["validate", "--help"], ["report", "--help"], ["import", "edges", "--help"],
+    ["import", "vna", "--help"], ["solve", "run.h5"],
+])
+def test_reach_cal_parses_before_it_imports_the_engine(argv):
+    code = PROBE.format(module="calibration.cli", main="main", argv=argv, heavy=HEAVY,
+                        light=LIGHT + CAL_PARSER)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    found = json.loads(done.stdout)
+    assert found["code"] in (0, 2)
+    assert found["heavy"] == []
+
+
 def test_status_against_a_site_with_references_imports_nothing_heavy(tmp_path):
     """The site's Touchstone references are not read (numpy) to find the daemon."""
     reference = tmp_path / "ref.s1p"
@@ -67,3 +88,17 @@ def test_status_against_a_site_with_references_imports_nothing_heavy(tmp_path):
     found = imported("reach_receiver.cli", "run_main", ["status", "--site", str(site)])
     assert found["code"] == 1  # no daemon answers there
     assert found["heavy"] == []
+
+
+def test_constants_are_the_engines_own():
+    """calibration.constants stands in for the engine's names; they must not drift apart."""
+    from calibration.cal_kit import STANDARD_NAMES
+    from calibration.cli import import_parser
+    from calibration.constants import ORDER_CEILING
+    from calibration.edges_text import INTEGRATION_PER_POSITION_S, UT141C
+    from calibration.model_fit import OrderChoice
+
+    assert OrderChoice.ceiling == ORDER_CEILING
+    assert import_parser.STANDARD_NAMES == STANDARD_NAMES
+    assert import_parser.INTEGRATION_PER_POSITION_S == INTEGRATION_PER_POSITION_S
+    assert "length" in UT141C

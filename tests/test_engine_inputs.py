@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from calibration.cli import main
-from calibration.cli_args import number_arg
-from calibration.cli_files import check_outputs
+from calibration.cli.args import number_arg
+from calibration.cli.files import check_outputs
 from calibration.errors import InvalidDataError
 from calibration.solution_file import read_solution
 

@@ -1,8 +1,10 @@
-"""What the ``reach-cal`` commands share: argument types, the solver options, registration.
+"""What the ``reach-cal`` parsers share: argument types, option groups, registration.
 
-:mod:`calibration.cli` and the modules of its other commands (:mod:`calibration.cli_import`,
-:mod:`calibration.cli_validate`) build their parsers from these, so that ``solve`` and
-``validate`` read ``--method``, ``--orders`` and ``--max-orders`` the same way.
+Every command's parser is built from these, so that ``solve`` and ``validate`` read
+``--method``, ``--orders`` and ``--max-orders`` the same way, and every band is ``LO,HI``
+in MHz. This module imports only :mod:`argparse` and :mod:`calibration.constants`: a
+parser is built (and ``--help`` printed) before any of the engine is imported; a
+command's module is imported by name when it runs (:func:`add_command`).
 """
 
 from __future__ import annotations
@@ -13,30 +15,27 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from .data import CalibrationData
-from .errors import InvalidDataError
-from .model_fit import OrderChoice
-from .noise_waves import PARAMETERS
-from .polynomial_model import Orders
-from .solvers import METHODS, AnySolution, solver
+from ..constants import DEFAULT_ALPHA, METHODS, ORDER_CEILING, PARAMETER_NAMES
 
 __all__ = [
     "MAX_ORDER",
     "ORDER_NAMES",
     "add_command",
+    "add_correction_options",
     "add_solver_options",
+    "alpha_arg",
+    "band_arg",
     "names_arg",
     "number_arg",
     "orders_arg",
     "output_arg",
-    "solver_from_args",
 ]
 
-ORDER_NAMES = ", ".join(PARAMETERS)
+ORDER_NAMES = ", ".join(PARAMETER_NAMES)
 #: The most terms one parameter's polynomial may have: the order search's own ceiling,
 #: beyond which its Legendre terms only fit noise (and the normal equations grow as n^2).
-MAX_ORDER = OrderChoice.ceiling
-Command = Callable[[argparse.Namespace], int]
+MAX_ORDER = ORDER_CEILING
+Orders = tuple[int, int, int, int, int]
 N = TypeVar("N", int, float)
 
 
@@ -82,9 +81,9 @@ def orders_arg(text: str) -> Orders:
         values = tuple(int(v) for v in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != len(PARAMETERS) or not all(0 <= v <= MAX_ORDER for v in values):
+    if len(values) != len(PARAMETER_NAMES) or not all(0 <= v <= MAX_ORDER for v in values):
         raise argparse.ArgumentTypeError(
-            f"expected {len(PARAMETERS)} comma-separated term counts 0-{MAX_ORDER} "
+            f"expected {len(PARAMETER_NAMES)} comma-separated term counts 0-{MAX_ORDER} "
             f"({ORDER_NAMES}; {MAX_ORDER} is the order search's ceiling), got {text!r}"
         )
     return values  # type: ignore[return-value]
@@ -106,14 +105,87 @@ def output_arg(text: str) -> str:
     return text
 
 
-def add_command(sub: Any, name: str, func: Command, **kwargs: Any) -> argparse.ArgumentParser:
-    """A subcommand whose help is the first line of ``func``'s docstring, which runs it."""
-    doc = func.__doc__ or ""
+def add_command(
+    sub: Any, name: str, target: str, doc: str, **kwargs: Any
+) -> argparse.ArgumentParser:
+    """A subcommand described by ``doc`` (its first line is the help) that runs ``target``.
+
+    ``target`` is ``"module:function"``, the module relative to :mod:`calibration.cli`;
+    :func:`calibration.cli.main.main` imports it only when the command runs.
+    """
     parser: argparse.ArgumentParser = sub.add_parser(
-        name, help=doc.split("\n")[0], description=doc, **kwargs
+        name, help=doc.split("\n")[0], description=doc,
+        formatter_class=argparse.RawDescriptionHelpFormatter, **kwargs,
     )
-    parser.set_defaults(func=func)
+    parser.set_defaults(target=target)
     return parser
+
+
+def band_arg(text: str) -> tuple[float, float]:
+    """Parse ``LO,HI`` in MHz with ``0 < LO < HI`` (argparse type)."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO,HI in MHz, got {text!r}") from None
+    if not (0 <= lo < hi and math.isfinite(hi)):
+        raise argparse.ArgumentTypeError(f"expected finite 0 <= LO < HI (MHz), got {text!r}")
+    return lo, hi
+
+
+def alpha_arg(text: str) -> float:
+    """A false-alarm rate in (0, 1) (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"expected a rate in (0, 1), got {text!r}")
+    return value
+
+
+def add_correction_options(parser: argparse.ArgumentParser) -> None:
+    """Register the preparation and consistency options (module doc) on ``parser``."""
+    group = parser.add_argument_group("data preparation and calibrator consistency")
+    group.add_argument("--band", type=band_arg, metavar="LO,HI", help="solve in LO-HI MHz")
+    group.add_argument(
+        "--mask-band",
+        type=band_arg,
+        action="append",
+        default=[],
+        metavar="LO,HI",
+        help="drop the channels in LO-HI MHz (repeatable)",
+    )
+    group.add_argument(
+        "--rfi",
+        action="store_true",
+        help="drop channels with spikes in a calibrator's load or noise-source spectrum",
+    )
+    group.add_argument(
+        "--smooth-s11",
+        type=number_arg(float, 0.0, 1.0, open_low=True),
+        metavar="P",
+        help="smooth every reflection with a spline of factor P in (0, 1] (1: none)",
+    )
+    consistency = group.add_mutually_exclusive_group()
+    consistency.add_argument(
+        "--check-consistency",
+        action="store_true",
+        help="test each calibrator held out against the others and report",
+    )
+    consistency.add_argument(
+        "--exclude-inconsistent",
+        type=positive_int,
+        nargs="?",
+        const=2,
+        metavar="N",
+        help="also exclude the calibrator that disagrees, at most N times (default 2)",
+    )
+    group.add_argument(
+        "--alpha",
+        type=alpha_arg,
+        default=DEFAULT_ALPHA,
+        help=f"false-alarm rate of a consistency round (default {DEFAULT_ALPHA})",
+    )
 
 
 def add_solver_options(parser: argparse.ArgumentParser) -> None:
@@ -137,19 +209,3 @@ def add_solver_options(parser: argparse.ArgumentParser) -> None:
         "--max-orders", type=orders_arg, help="upper limits of the evidence search (default 8 each)"
     )
     parser.add_argument("--calibrators", type=names_arg, help="use only these calibrators")
-
-
-def solver_from_args(args: argparse.Namespace) -> Callable[[CalibrationData], AnySolution]:
-    """The solve that :func:`add_solver_options`'s options ask for (without the subset).
-
-    Orders, order limits or a basis with a per-channel ``--method`` are refused
-    (:func:`calibration.solvers.solver`).
-    """
-    choice = None
-    if args.orders is not None:
-        choice = OrderChoice.fixed(args.orders)
-    elif args.max_orders is not None:
-        if min(args.max_orders) < 1:
-            raise InvalidDataError("--max-orders must be >= 1 for every parameter")
-        choice = OrderChoice(max_orders=args.max_orders)
-    return solver(args.method, choice, args.basis)

@@ -21,14 +21,14 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .atomic_file import write_atomically
-from .cli_args import add_command, add_solver_options, output_arg, solver_from_args
-from .cli_files import check_outputs
-from .errors import InvalidDataError
-from .hdf5_io import read_run
-from .validation import HeldOut, LeaveOneOutReport, leave_one_out
+from ..atomic_file import write_atomically
+from ..errors import InvalidDataError
+from ..hdf5_io import read_run
+from ..validation import HeldOut, LeaveOneOutReport, leave_one_out
+from .files import check_outputs
+from .solve import solver_from_args
 
-__all__ = ["add_validate_command", "cmd_validate"]
+__all__ = ["cmd_validate"]
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -83,16 +83,3 @@ def _csv(report: LeaveOneOutReport) -> str:
         row["orders"] = " ".join(map(str, result.orders))
         writer.writerow(row)
     return buffer.getvalue()
-
-
-def add_validate_command(sub: Any) -> None:
-    """Register ``validate`` on the ``reach-cal`` subparsers ``sub``."""
-    validate = add_command(sub, "validate", cmd_validate)
-    validate.add_argument("run", help="run file (HDF5)")
-    validate.add_argument(
-        "--leave-one-out",
-        action="store_true",
-        help="solve without each calibrator in turn and calibrate it",
-    )
-    add_solver_options(validate)
-    validate.add_argument("-o", "--output", type=output_arg, help="report to write (.json or .csv)")

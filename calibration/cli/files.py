@@ -27,8 +27,8 @@ from typing import Literal
 
 import h5py
 
-from .errors import InvalidDataError
-from .hdf5_io import RUN_FORMATS
+from ..errors import InvalidDataError
+from ..hdf5_io import RUN_FORMATS
 
 __all__ = ["OutputKind", "check_outputs", "same_file"]
 

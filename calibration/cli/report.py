@@ -6,18 +6,16 @@
 
 ``SOLUTION.h5`` is a solution file or a receiver's run file (its latest solution, and the
 run itself unless ``--run`` names another). :mod:`calibration.report` says what is written.
-matplotlib is imported only when the command runs.
 """
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
-from .cli_args import add_command
-from .cli_files import check_outputs
+from ..report import write_report
+from .files import check_outputs
 
-__all__ = ["add_report_command", "cmd_report"]
+__all__ = ["cmd_report"]
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -28,19 +26,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     powers, flagged channels, thermocouples, the run's checks and alarms.
     """
     check_outputs({"-o": (args.output, "directory")}, [args.solution, args.run])
-    from .report import write_report
-
     report = write_report(args.solution, args.output, args.run, pdf=args.pdf)
     for path in (*report.figures, report.pdf, report.markdown, report.html):
         if path is not None:
             print(f"wrote {path}")
     return 0
-
-
-def add_report_command(sub: Any) -> None:
-    """Register ``report`` on the ``reach-cal`` subparsers ``sub``."""
-    report = add_command(sub, "report", cmd_report)
-    report.add_argument("solution", help="solution file, or a receiver run file (HDF5)")
-    report.add_argument("--run", help="run file the solution calibrates (HDF5)")
-    report.add_argument("-o", "--output", required=True, help="directory to write (created)")
-    report.add_argument("--pdf", action="store_true", help="also write all figures to report.pdf")

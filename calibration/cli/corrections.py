@@ -1,4 +1,4 @@
-"""``reach-cal solve`` options for data preparation and calibrator consistency (issue 14).
+"""What ``reach-cal solve``'s data-preparation and calibrator-consistency options do.
 
 ::
 
@@ -25,7 +25,6 @@ check_noise_source`): PASS or FAIL, also in ``reach-cal summary``.
 from __future__ import annotations
 
 import argparse
-import math
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -33,20 +32,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .cli_args import number_arg, positive_int
-from .consistency import DEFAULT_ALPHA, check_consistency, exclude_inconsistent
-from .data import CalibrationData
-from .errors import CalibrationError
-from .measurement_uncertainty import check_noise_source
-from .noise_waves import INDEX
-from .preparation import excision_flags, smooth_reflection, smoothing_width_hz
-from .rfi import calibrator_flags
-from .simulate import NC346A_ENR_DB
-from .solvers import AnySolution, band_hz
+from ..consistency import check_consistency, exclude_inconsistent
+from ..data import CalibrationData
+from ..errors import CalibrationError
+from ..measurement_uncertainty import check_noise_source
+from ..noise_waves import INDEX
+from ..preparation import excision_flags, smooth_reflection, smoothing_width_hz
+from ..rfi import calibrator_flags
+from ..simulate import NC346A_ENR_DB
+from ..solvers import AnySolution, band_hz
 
 __all__ = [
-    "add_correction_options",
-    "band_arg",
     "corrected_solve",
     "noise_source_line",
     "prepare",
@@ -54,73 +50,6 @@ __all__ = [
 
 BoolArray = NDArray[np.bool_]
 Solve = Callable[[CalibrationData], AnySolution]
-
-
-def band_arg(text: str) -> tuple[float, float]:
-    """Parse ``LO,HI`` in MHz with ``0 < LO < HI`` (argparse type)."""
-    try:
-        lo, hi = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LO,HI in MHz, got {text!r}") from None
-    if not (0 <= lo < hi and math.isfinite(hi)):
-        raise argparse.ArgumentTypeError(f"expected finite 0 <= LO < HI (MHz), got {text!r}")
-    return lo, hi
-
-
-def alpha_arg(text: str) -> float:
-    """A false-alarm rate in (0, 1) (argparse type)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"expected a rate in (0, 1), got {text!r}")
-    return value
-
-
-def add_correction_options(parser: argparse.ArgumentParser) -> None:
-    """Register the preparation and consistency options (module doc) on ``parser``."""
-    group = parser.add_argument_group("data preparation and calibrator consistency")
-    group.add_argument("--band", type=band_arg, metavar="LO,HI", help="solve in LO-HI MHz")
-    group.add_argument(
-        "--mask-band",
-        type=band_arg,
-        action="append",
-        default=[],
-        metavar="LO,HI",
-        help="drop the channels in LO-HI MHz (repeatable)",
-    )
-    group.add_argument(
-        "--rfi",
-        action="store_true",
-        help="drop channels with spikes in a calibrator's load or noise-source spectrum",
-    )
-    group.add_argument(
-        "--smooth-s11",
-        type=number_arg(float, 0.0, 1.0, open_low=True),
-        metavar="P",
-        help="smooth every reflection with a spline of factor P in (0, 1] (1: none)",
-    )
-    consistency = group.add_mutually_exclusive_group()
-    consistency.add_argument(
-        "--check-consistency",
-        action="store_true",
-        help="test each calibrator held out against the others and report",
-    )
-    consistency.add_argument(
-        "--exclude-inconsistent",
-        type=positive_int,
-        nargs="?",
-        const=2,
-        metavar="N",
-        help="also exclude the calibrator that disagrees, at most N times (default 2)",
-    )
-    group.add_argument(
-        "--alpha",
-        type=alpha_arg,
-        default=DEFAULT_ALPHA,
-        help=f"false-alarm rate of a consistency round (default {DEFAULT_ALPHA})",
-    )
 
 
 def _keep(data: CalibrationData, keep: BoolArray, what: str) -> CalibrationData:

@@ -1,0 +1,7 @@
+"""``python -m calibration.cli``: the same as ``reach-cal``."""
+
+import sys
+
+from .main import main
+
+sys.exit(main())

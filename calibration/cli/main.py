@@ -1,0 +1,220 @@
+"""``reach-cal``: simulate, solve, apply and summarise noise-wave calibrations.
+
+::
+
+    reach-cal simulate -o RUN.h5 [--seed N] [--integration-s S] [--channel-width-hz B]
+                       [--band LO HI] [--calibrators a,b,...] [--vna-sigma X]
+    reach-cal solve RUN.h5 -o SOLUTION.h5 [--method radiometric|thesis|least-squares|bayesian]
+                    [--orders n_unc,n_cos,n_sin,n_NS,n_L | --max-orders ...] [--calibrators ...]
+                    [--band LO,HI] [--mask-band LO,HI] [--rfi] [--smooth-s11 P]
+                    [--check-consistency | --exclude-inconsistent [N]]  (cli.corrections)
+    reach-cal apply SOLUTION.h5 RUN.h5 [--source ant] [-o OUT.h5] [--csv OUT.csv]
+                    [--vna-accuracy DRAWS [--vna-correlation-mhz C] [--seed N]]
+    reach-cal summary SOLUTION.h5 [--run RUN.h5 --source ant]
+    reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,...  (cli.import_commands)
+    reach-cal import vna DIR -o OUT_DIR --devices a,b,...
+    reach-cal validate RUN.h5 --leave-one-out [...]
+    reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf]
+
+Files are those of :mod:`calibration.hdf5_io`. No command writes over one of its inputs or
+a file holding measurements (:mod:`calibration.cli.files`); every numeric option is
+range-checked as it is parsed (:func:`calibration.cli.args.number_arg`); ``apply`` refuses
+a run on another channel grid than its solution's. Errors an operator can act on (unreadable or
+malformed files, unusable data, an unsolvable model) print ``reach-cal: error: <message>``
+on stderr without a traceback and exit with status 2, as do usage errors; success is 0.
+
+Parsing imports nothing of the engine (:mod:`calibration.cli.args`): ``--help`` and
+``--version`` answer at once, and a command's module (:mod:`.simulate`, :mod:`.solve`,
+:mod:`.apply`, :mod:`.summary`, :mod:`.validate`, :mod:`.report`, :mod:`.import_commands`)
+is imported when it runs.
+"""
+
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from ..constants import DEFAULT_CORRELATION_HZ, ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
+from ..errors import CalibrationError
+from .args import (
+    add_command,
+    add_correction_options,
+    add_solver_options,
+    count_arg,
+    names_arg,
+    number_arg,
+    output_arg,
+    positive_float,
+    positive_int,
+)
+from .import_parser import add_import_command
+
+PROG = "reach-cal"
+#: The most Monte-Carlo refits ``apply --vna-accuracy`` makes (64 is typical).
+MAX_VNA_DRAWS = 10_000
+
+#: Each command's help (first line) and description.
+DESCRIPTIONS = {
+    "simulate": "Write a simulated run with the validation source ``ant`` and the truth.",
+    "solve": "Solve a run for the noise-wave parameters and write the solution.",
+    "apply": "Calibrate a source of a run with a solution.",
+    "summary": "Print a solution's parameters and evidence, and its distance to the floor.",
+    "validate": """Validate a run: each calibrator held out of the solve, calibrated as a source.
+
+Columns (K): RMS of the held-out calibrator's calibrated minus known temperature; the
+RMS predicted error, calibration part alone and in full (with the source's radiometer
+noise); actual / full predicted; fractions of channels inside the 68% and 95%
+predictive intervals; the orders chosen. A refused solve prints its reason.""",
+    "report": """Write a solution's figures (PNG, optionally one PDF) and summary (Markdown, HTML).
+
+With --run (or a receiver's run file as SOLUTION.h5) the report adds each source's
+residual against its noise, the distance to the noise floor, the reflections, Dicke
+powers, flagged channels, thermocouples, the run's checks and alarms.""",
+}
+
+
+def _draws_arg(text: str) -> int:
+    """``--vna-accuracy``: 0 (none) or 2-:data:`MAX_VNA_DRAWS` refits (argparse type)."""
+    draws = number_arg(int, 0, MAX_VNA_DRAWS)(text)
+    if draws == 1:
+        raise argparse.ArgumentTypeError("expected 0 (none) or at least 2 draws, got '1'")
+    return draws
+
+
+def _version() -> str:
+    """The installed project's version (the same as reach-run's)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("reach-receiver")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``reach-cal`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Simulate, solve, apply and summarise REACH noise-wave calibrations.",
+        epilog="Exit status: 0 success, 2 error (message on stderr).",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str) -> argparse.ArgumentParser:
+        return add_command(sub, name, f".{name}:cmd_{name}", DESCRIPTIONS[name])
+
+    sim = command("simulate")
+    sim.add_argument(
+        "-o", "--output", type=output_arg, required=True, help="run file to write (HDF5)"
+    )
+    sim.add_argument("--seed", type=count_arg, default=0, help="noise seed (default 0)")
+    sim.add_argument(
+        "--integration-s",
+        type=positive_float,
+        default=600.0,
+        help="integration per Dicke position, s (default 600)",
+    )
+    sim.add_argument(
+        "--channel-width-hz",
+        type=positive_float,
+        default=ITPM_CHANNEL_WIDTH_HZ,
+        help="channel width, Hz (default the iTPM's 12207 Hz)",
+    )
+    sim.add_argument(
+        "--band",
+        type=positive_float,
+        nargs=2,
+        default=(50.0, 130.0),
+        metavar=("LO", "HI"),
+        help="band in MHz (default 50 130)",
+    )
+    sim.add_argument(
+        "--calibrators",
+        type=names_arg,
+        default=REACH_CALIBRATORS,
+        help="comma-separated calibrators (default all twelve)",
+    )
+    sim.add_argument(
+        "--vna-sigma",
+        type=number_arg(float, 0.0, 1.0),
+        default=0.0,
+        help="noise on measured reflection coefficients (default 0)",
+    )
+
+    solve = command("solve")
+    solve.add_argument("run", help="run file (HDF5)")
+    solve.add_argument(
+        "-o", "--output", type=output_arg, required=True, help="solution file to write (HDF5)"
+    )
+    add_solver_options(solve)
+    add_correction_options(solve)
+
+    apply = command("apply")
+    apply.add_argument("solution", help="solution file (HDF5)")
+    apply.add_argument("run", help="run file holding the source (HDF5)")
+    apply.add_argument("--source", default="ant", help="source to calibrate (default ant)")
+    apply.add_argument(
+        "-o", "--output", type=output_arg, help="calibrated spectrum to write (HDF5)"
+    )
+    apply.add_argument("--csv", type=output_arg, help="calibrated spectrum to write (CSV)")
+    apply.add_argument(
+        "--vna-accuracy", type=_draws_arg, default=0, metavar="DRAWS",
+        help="add the VNA's data-sheet accuracy (thesis table 2.3) as a systematic error, "
+        "from DRAWS Monte-Carlo refits (64 is typical; 0, the default, leaves it out)",
+    )
+    apply.add_argument(
+        "--vna-correlation-mhz", type=positive_float, default=DEFAULT_CORRELATION_HZ / 1e6,
+        help="correlation length of that error over frequency (default %(default)g MHz)",
+    )
+    apply.add_argument(
+        "--seed", type=count_arg, default=0, help="seed of the Monte-Carlo draws"
+    )
+
+    summary = command("summary")
+    summary.add_argument("solution", help="solution file (HDF5)")
+    summary.add_argument("--run", help="run file: report the noise floor of --source")
+    summary.add_argument("--source", default="ant", help="source of --run (default ant)")
+    summary.add_argument(
+        "--top", type=positive_int, default=5, help="evidence-table rows to show (>= 1)"
+    )
+    add_import_command(sub)
+
+    validate = command("validate")
+    validate.add_argument("run", help="run file (HDF5)")
+    validate.add_argument(
+        "--leave-one-out",
+        action="store_true",
+        help="solve without each calibrator in turn and calibrate it",
+    )
+    add_solver_options(validate)
+    validate.add_argument("-o", "--output", type=output_arg, help="report to write (.json or .csv)")
+
+    report = command("report")
+    report.add_argument("solution", help="solution file, or a receiver run file (HDF5)")
+    report.add_argument("--run", help="run file the solution calibrates (HDF5)")
+    report.add_argument("-o", "--output", required=True, help="directory to write (created)")
+    report.add_argument("--pdf", action="store_true", help="also write all figures to report.pdf")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``reach-cal``; return the exit status (0 success, 2 error)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) and usage errors (2)
+        return exc.code if isinstance(exc.code, int) else 2
+    module, name = args.target.split(":")
+    try:
+        command = getattr(importlib.import_module(module, __package__), name)
+        return int(command(args))
+    except (CalibrationError, OSError) as err:
+        print(f"{PROG}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,93 @@
+"""``reach-cal summary``: a solution's parameters and evidence, and its distance to the floor."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from ..hdf5_io import read_truth
+from ..identifiability import caution_lines
+from ..noise_waves import PARAMETERS, design_terms, source_temperature
+from ..per_frequency import ChannelSolution
+from ..polynomial_model import coefficient_slices
+from ..solution_file import read_solution
+from ..solvers import AnySolution, method_name, solution_noise_floor
+from .apply import calibrate_source, mk, rms
+from .args import ORDER_NAMES
+from .corrections import noise_source_line
+from .solve import channel_lines, noise_line
+
+
+def cmd_summary(args: argparse.Namespace) -> int:
+    """Print a solution's parameters and evidence, and its distance to the noise floor."""
+    solution = read_solution(args.solution)
+    if isinstance(solution, ChannelSolution):
+        lo, hi = solution.band_hz
+        print(f"solution {args.solution}: {method_name(solution)} solver, per channel on "
+              f"{lo / 1e6:.3f}-{hi / 1e6:.3f} MHz")
+        print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
+        for line in channel_lines(solution):
+            print(line)
+        print(noise_source_line(solution))
+        if args.run:
+            _floor_summary(solution, args.run, args.source)
+        return 0
+    post, basis = solution.posterior, solution.basis
+    print(
+        f"solution {args.solution}: {solution.method} solver, {basis.kind} basis on "
+        f"{basis.f_lo_hz / 1e6:.3f}-{basis.f_hi_hz / 1e6:.3f} MHz"
+    )
+    print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
+    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))}")
+    if solution.models_line():
+        print(f"averaged over models (orders, weight): {solution.models_line()}")
+        print(f"posterior layout (the models' envelope): {solution.orders}")
+    for line in caution_lines(solution):
+        print(line)
+    at_ceiling = solution.metadata.get("orders_at_ceiling") or []
+    if at_ceiling:
+        print(
+            f"warning: {', '.join(at_ceiling)} reached the order ceiling "
+            f"{solution.metadata.get('order_limits')}: the data want more terms than were "
+            "searched (unmodelled structure?)"
+        )
+    print("coefficients (K, posterior mean +- std):")
+    std = np.sqrt(np.diag(post.covariance))
+    for name, s in zip(PARAMETERS, coefficient_slices(solution.orders), strict=True):
+        terms = ", ".join(f"{m:.6g} +- {e:.2g}" for m, e in zip(post.mean[s], std[s], strict=True))
+        print(f"  {name:>3}: {terms or '(none)'}")
+    print(f"log evidence: {post.log_evidence:.3f} (posterior dof {post.dof:.6g})")
+    table = sorted(solution.evidence_table.items(), key=lambda kv: -kv[1])
+    best = table[0][1] if table else post.log_evidence
+    print(f"evidence table: {len(table)} models, top {min(args.top, len(table))}:")
+    for orders, logz in table[: args.top]:
+        print(f"  {','.join(map(str, orders)):<14} log Z = {logz:.3f}  (delta {logz - best:.3f})")
+    print(noise_line(solution))
+    print(noise_source_line(solution))
+    if args.run:
+        _floor_summary(solution, args.run, args.source)
+    return 0
+
+
+def _floor_summary(solution: AnySolution, run: str, name: str) -> None:
+    """Noise floor, predicted and (for simulations) actual calibration error of a source."""
+    data, source, spectrum = calibrate_source(solution, run, name)
+    used = [n for n in solution.calibrators if n in data.sources]
+    cal_data = data.subset(used) if len(used) == len(solution.calibrators) and used else data
+    floor = solution_noise_floor(solution, cal_data, source, own_reflection=False).rms
+    predicted = rms(spectrum.std_calibration)
+    print(f"source {name!r} of {run} ({len(cal_data.names)} calibrators):")
+    model = "per channel" if isinstance(solution, ChannelSolution) else "polynomial"
+    print(f"  noise floor RMS (Cramer-Rao, radiometer noise, {model} model): {mk(floor)}")
+    print(f"  predicted calibration std RMS: {mk(predicted)}")
+    print(f"  distance to floor (predicted / floor): {predicted / floor:.3f}")
+    truth = read_truth(run)
+    if truth is not None:
+        terms = design_terms(source.gamma, data.gamma_rec)
+        true_t = source_temperature(truth.theta(data.freq_hz), terms, source.q)
+        actual = rms(spectrum.mean - true_t)
+        print(
+            f"  actual calibration error RMS (solution vs true parameters, same Q): "
+            f"{mk(actual)} ({actual / floor:.3f} x floor)"
+        )
