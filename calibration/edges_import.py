@@ -10,7 +10,14 @@ pipeline's modelled S11s). What differs between runs is given, not assumed:
 * the S11s: the pipeline's models, splines through the VNA exports, or reflections the
   caller supplies (e.g. raw VNA readings corrected by :mod:`calibration.vna_import`);
 * the loss of the cable between the hot load and its S11 plane: a measured power-gain
-  table (:func:`read_gain_table`), the EDGES cable model (:class:`CableLoss`), or none.
+  table (:func:`read_gain_table`, read over the band only), the EDGES cable model
+  (:class:`CableLoss`), or none;
+* the path between the plane the receiver's reflection was read at and the calibrators'
+  plane (:mod:`calibration.receiver_path`, eq. 4.7): a two-port file, a cable model, or
+  none (the planes coincide).
+
+Every S11 is checked against the band before use: a band beyond an S11's frequencies is
+refused naming both, and a reflection ``|Gamma| >= 1`` is refused naming where it starts.
 
 The hot load's temperature at the S11 plane (MIT EDGES memo 132; edges-cal ``alanmode``)::
 
@@ -48,6 +55,7 @@ from .edges_text import (
     read_spectrum,
 )
 from .errors import FileFormatError, InvalidDataError
+from .receiver_path import ReceiverPath
 from .text_table import read_rows
 
 __all__ = [
@@ -123,25 +131,37 @@ class CableLoss:
         return coax_power_gain(freq_hz, gamma_load, self.cable)
 
 
-def read_gain_table(path: str | Path) -> MeasuredLoss:
+def read_gain_table(
+    path: str | Path, band_mhz: tuple[float, float] | None = None
+) -> MeasuredLoss:
     """A power-gain table: rows ``freq_MHz gain`` (whitespace or commas, ``#`` comments).
 
-    Frequencies must increase and gains lie in ``(0, 1]``; a row that breaks this is named
-    as ``file:line``.
+    Frequencies must increase. With ``band_mhz`` only the rows inside the band are used,
+    with the one row beyond each edge that linear interpolation needs (a published table,
+    edges-cal's ``hot_load_loss.txt``, runs over the whole spectrum, and its model gives
+    gains above 1 far outside the fit band, e.g. at 40 MHz for a 50-190 MHz fit). A row
+    used whose gain is not in ``(0, 1]`` is refused as ``file:line: ... at F MHz``.
     """
     table, lines = read_rows(path, 2)
     freq_hz, gain = table[:, 0] * 1e6, table[:, 1]
     step = np.flatnonzero(np.diff(freq_hz) <= 0)
     if step.size:
         raise FileFormatError(f"{path}:{lines[step[0] + 1]}: frequencies must increase")
-    bad = np.flatnonzero(~((gain > 0) & (gain <= 1)))
-    if bad.size:
+    keep = np.arange(freq_hz.size)
+    if band_mhz is not None:
+        lo = max(int(np.searchsorted(freq_hz, band_mhz[0] * 1e6 - _MATCH_HZ, "right")) - 1, 0)
+        hi = int(np.searchsorted(freq_hz, band_mhz[1] * 1e6 + _MATCH_HZ, "left")) + 1
+        keep = keep[lo:hi]
+    bad = [i for i in keep if not 0 < gain[i] <= 1]
+    if bad:
+        i = bad[0]
         raise FileFormatError(
-            f"{path}:{lines[bad[0]]}: power gain {gain[bad[0]]:g} is not in (0, 1]"
+            f"{path}:{lines[i]}: power gain {gain[i]:g} at {freq_hz[i] / 1e6:g} MHz is not in "
+            "(0, 1]: a passive cable neither amplifies nor blocks"
         )
-    if freq_hz.size < 2:
-        raise FileFormatError(f"{path}: a gain table needs at least two rows")
-    return MeasuredLoss(freq_hz, gain, str(path))
+    if keep.size < 2:
+        raise FileFormatError(f"{path}: a gain table needs at least two rows over the band")
+    return MeasuredLoss(freq_hz[keep], gain[keep], str(path))
 
 
 @dataclass(frozen=True)
@@ -166,6 +186,10 @@ class EdgesImport:
         noiseless-receiver bound, :func:`calibration.edges_text.radiometer_q_variance`).
     hot_loss
         The cable loss of eq. (L1) (:class:`MeasuredLoss`, :class:`CableLoss`) or ``None``.
+    receiver_path
+        The path from the plane the receiver was read at to the calibrators' plane
+        (:mod:`calibration.receiver_path`), applied to the receiver's reflection whatever
+        its origin, or ``None``.
     lossy_load, cable_load
         The load behind the cable (``hot``) and the load whose temperature the cable
         shares (``amb``).
@@ -182,6 +206,7 @@ class EdgesImport:
     lossy_load: str = "hot"
     cable_load: str = "amb"
     integration_per_position_s: float = INTEGRATION_PER_POSITION_S
+    receiver_path: ReceiverPath | None = None
 
     def __post_init__(self) -> None:
         loads = self.layout.loads
@@ -255,15 +280,21 @@ def import_edges(
         raise InvalidDataError(f"{paths[first]}: fewer than 2 channels in {spec.band_mhz} MHz")
     names = (*layout.loads, layout.receiver)
     if reflections is not None:
-        s11 = {n: _on_grid(freq, reflections, n, "the corrected reflections") for n in names}
+        given = _with_receiver_path(reflections, layout.receiver, spec.receiver_path)
+        s11 = {n: _on_grid(freq, given, n, "the corrected reflections", spec) for n in names}
         s11_origin = "given"
     elif spec.s11 == "modelled":
         s11 = _modelled_on_grid(directory, layout, freq, spec.band_mhz, names)
+        if spec.receiver_path is not None:
+            s11[layout.receiver] = spec.receiver_path.apply(freq, s11[layout.receiver])
         s11_origin = str(find_file(directory, layout.s11_modelled))
     else:
-        exports = {n: read_s11_csv(find_file(directory, layout.s11_export, n)) for n in names}
-        s11 = {n: _on_grid(freq, exports, n, layout.s11_export) for n in names}
+        read = {n: read_s11_csv(find_file(directory, layout.s11_export, n)) for n in names}
+        exports = _with_receiver_path(read, layout.receiver, spec.receiver_path)
+        s11 = {n: _on_grid(freq, exports, n, layout.s11_export, spec) for n in names}
         s11_origin = layout.s11_export
+    for name in names:
+        _check_passive(freq, s11[name], name, s11_origin, spec.band_mhz)
     temps: dict[str, FloatArray] = {
         n: np.full(freq.size, 1.0) * spec.temperatures_k[n] for n in layout.loads
     }
@@ -332,22 +363,76 @@ def _modelled_on_grid(
     missing = [n for n in names if n not in columns]
     if missing:
         raise FileFormatError(f"{path}: no column for {', '.join(missing)}")
+    _check_range(f_mod, freq, "the modelled S11s", str(path), band_mhz)
     idx = np.minimum(np.searchsorted(f_mod, freq), f_mod.size - 1)
     if not np.allclose(f_mod[idx], freq, rtol=0.0, atol=_MATCH_HZ):
-        raise FileFormatError(f"{path}: does not cover {band_mhz} MHz on the spectra's grid")
+        raise FileFormatError(f"{path}: not on the spectra's frequency grid over {band_mhz} MHz")
     return {n: columns[n][idx] for n in names}
 
 
+def _with_receiver_path(
+    reflections: Mapping[str, Reflection], receiver: str, path: ReceiverPath | None
+) -> Mapping[str, Reflection]:
+    """``reflections`` with the receiver's moved to the calibrators' plane, on its own grid."""
+    if path is None or receiver not in reflections:
+        return reflections
+    f_rec, g_rec = reflections[receiver]
+    return {**reflections, receiver: (f_rec, path.apply(f_rec, g_rec))}
+
+
 def _on_grid(
-    freq: FloatArray, reflections: Mapping[str, Reflection], name: str, origin: str
+    freq: FloatArray,
+    reflections: Mapping[str, Reflection],
+    name: str,
+    origin: str,
+    spec: EdgesImport,
 ) -> ComplexArray:
     """A cubic spline of ``reflections[name]`` at ``freq``; refuses to extrapolate."""
     if name not in reflections:
         raise InvalidDataError(f"{origin}: no reflection for {name!r}")
     f_vna, gamma = reflections[name]
-    if freq[0] < f_vna[0] - _MATCH_HZ or freq[-1] > f_vna[-1] + _MATCH_HZ:
-        raise InvalidDataError(
-            f"{origin}: {name!r} is measured over {f_vna[0] / 1e6:.6g}-{f_vna[-1] / 1e6:.6g} "
-            f"MHz, not the band {freq[0] / 1e6:.6g}-{freq[-1] / 1e6:.6g} MHz"
-        )
+    _check_range(f_vna, freq, f"S11 of {name}", origin, spec.band_mhz)
     return np.asarray(CubicSpline(f_vna, gamma)(freq), dtype=complex)
+
+
+def _band_text(lo_mhz: float, hi_mhz: float) -> str:
+    return f"{lo_mhz:.6g},{hi_mhz:.6g}"
+
+
+def _check_range(
+    f_data: FloatArray, freq: FloatArray, what: str, origin: str, band_mhz: tuple[float, float]
+) -> None:
+    """Refuse a band that reaches beyond the data's frequencies, naming both.
+
+    Made before any reflection is judged: a spline or model beyond its data is no reading.
+    """
+    if freq[0] >= f_data[0] - _MATCH_HZ and freq[-1] <= f_data[-1] + _MATCH_HZ:
+        return
+    lo, hi = f_data[0] / 1e6, f_data[-1] / 1e6
+    # to 10 kHz, inside the data
+    inside = (max(band_mhz[0], np.ceil(lo * 100) / 100), min(band_mhz[1], np.floor(hi * 100) / 100))
+    fix = f"give --band {_band_text(*inside)}" if inside[0] < inside[1] else "no channel is left"
+    raise InvalidDataError(
+        f"{what} ({origin}) covers {lo:.6g}-{hi:.6g} MHz; --band "
+        f"{_band_text(*band_mhz)} reaches beyond: {fix}"
+    )
+
+
+def _check_passive(
+    freq: FloatArray, gamma: ComplexArray, name: str, origin: str, band_mhz: tuple[float, float]
+) -> None:
+    """Refuse ``|Gamma| >= 1``, naming where: a model used beyond its fit, or a bad VNA cal."""
+    over = np.flatnonzero(np.abs(gamma) >= 1.0)
+    if not over.size:
+        return
+    worst = int(np.argmax(np.abs(gamma)))
+    first = float(freq[over[0]]) / 1e6
+    where = f"from {first:.6g} MHz" if over.size > 1 else f"at {first:.6g} MHz"
+    fix = "check the VNA calibration"
+    if over[0] > 0 and np.all(np.abs(gamma[over[0]:]) >= 1.0):  # a tail: data valid below it
+        below = _band_text(band_mhz[0], np.floor(freq[over[0] - 1] / 1e4) / 100)
+        fix = f"if its data end there, give --band {below}; else {fix}"
+    raise InvalidDataError(
+        f"S11 of {name} ({origin}): |Gamma| reaches {abs(gamma[worst]):.4g} at "
+        f"{freq[worst] / 1e6:.6g} MHz (>= 1 {where}), impossible for a passive load;\n{fix}"
+    )

@@ -31,6 +31,19 @@ order; without them every source with a temperature is a calibrator, sorted by n
 ``metadata``: the run's metadata as JSON; on ``simulation_truth``: ``basis_kind``,
 ``basis_f_lo_hz``, ``basis_f_hi_hz`` (only in simulated runs: the receiver simulated).
 
+Optional root attributes of a run file (strings; read with :func:`run_noise_source_model`
+and :func:`run_power_spectra`):
+
+* ``noise_source_model``: the noise source the run's ``{src}_ns_spectra`` were taken with.
+  ``"NC346A"`` (the Noisecom diode of REACH's receiver, thesis table 2.1) is written by
+  REACH's own run layer and by simulations of that diode; only where it is ``"NC346A"``
+  is the fitted ``T_NS`` held to that diode's ENR table. Absent (imports of other
+  instruments' data, e.g. EDGES) means unknown: no ENR check.
+* ``power_spectra``: ``"placeholder"`` when the ``*_spectra`` are not measured powers but
+  stand-ins that only carry ``Q`` (``reach-cal import edges`` writes ``P_load = 300``,
+  ``P_NS = 1300``, ``P_src = T*``); ``"measured"`` or absent otherwise. Such powers must
+  not be shown as measurements.
+
 **Integration-time convention.** ``integration_s_*`` is the integration time of *one row*
 of the matching spectra dataset; a 1-D dataset is one row. A 2-D dataset of ``n_spectra``
 rows (REACH's repeated spectra) is averaged over its first axis on reading, with integration
@@ -316,6 +329,34 @@ def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> 
     return SourceData(
         name, gamma, p_src, p_load, p_ns, integration, temperature, override, std_k, gamma_std
     )
+
+
+#: ``noise_source_model`` of a run whose noise source is REACH's NC346A diode.
+NC346A = "NC346A"
+#: ``power_spectra`` of a run whose spectra are stand-ins carrying only Q.
+PLACEHOLDER_POWERS, MEASURED_POWERS = "placeholder", "measured"
+
+
+def _root_string(path: PathLike, name: str) -> str | None:
+    with _open(path, RUN_FORMATS) as f:
+        value = f.attrs.get(name)
+    return None if value is None else _as_str(value)
+
+
+def run_noise_source_model(path: PathLike) -> str | None:
+    """The run's ``noise_source_model`` root attribute (module docstring), ``None`` if absent."""
+    return _root_string(path, "noise_source_model")
+
+
+def run_power_spectra(path: PathLike) -> str:
+    """The run's ``power_spectra``: ``"placeholder"`` or ``"measured"`` (the default)."""
+    value = _root_string(path, "power_spectra")
+    if value not in (None, PLACEHOLDER_POWERS, MEASURED_POWERS):
+        raise FileFormatError(
+            f"{path}: root attribute 'power_spectra' is {value!r}, not "
+            f"{PLACEHOLDER_POWERS!r} or {MEASURED_POWERS!r}"
+        )
+    return value or MEASURED_POWERS
 
 
 def read_run(path: PathLike) -> tuple[CalibrationData, dict[str, SourceData]]:

@@ -39,10 +39,18 @@ from .cal_kit import (
 )
 from .edges_import import find_file
 from .errors import FileFormatError, InvalidDataError
+from .kit_format import KIT_EXAMPLE, KIT_FORMAT
 from .one_port import OnePortTerms, solve_one_port
 from .touchstone import read_touchstone
 
-__all__ = ["VnaLayout", "correct_exports", "read_cal_kit"]
+__all__ = [
+    "KIT_EXAMPLE",
+    "KIT_FORMAT",
+    "VnaLayout",
+    "check_receiver_plane",
+    "correct_exports",
+    "read_cal_kit",
+]
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -112,6 +120,27 @@ def correct_exports(
     return out
 
 
+def check_receiver_plane(
+    layout: VnaLayout, receiver: str, path_given: bool, planes_coincide: bool = False
+) -> None:
+    """Refuse a receiver read at its own standards' plane with no path to the loads' plane.
+
+    Standards of its own (EDGES-3's ``*_lna_S/O/L.s1p``) put the receiver's corrected
+    reflection at another plane than the calibrators'; used as it is, EDGES-3's receiver
+    S11 is off by 0.06 (noise scale s^2 of 15.7, leave-one-out errors of 1000+ K). The
+    path (:mod:`calibration.receiver_path`) must be given, or the planes said to coincide.
+    """
+    own = layout.standards_of(receiver)
+    shared = tuple(layout.standards[s] for s in STANDARD_NAMES)
+    if own == shared or path_given or planes_coincide:
+        return
+    raise InvalidDataError(
+        f"the receiver {receiver!r} is read with its own standards ({', '.join(own)}), at "
+        "another plane than the loads';\ngive the path between them: --receiver-cable "
+        "(EDGES-3: edges3) or --receiver-path FILE.s2p, or --receiver-path none if they coincide"
+    )
+
+
 def _error_terms(files: tuple[Path, ...], kit: CalKit) -> tuple[FloatArray, OnePortTerms]:
     """The port's error terms from the standards' files, in :data:`STANDARD_NAMES` order."""
     readings = [read_touchstone(path) for path in files]
@@ -134,7 +163,7 @@ _OFFSET_FIELDS = ("delay_s", "loss_gohm_per_s", "z0_ohm")
 def read_cal_kit(path: str | Path) -> CalKit:
     """A calibration kit from JSON, in the data sheet's units (:mod:`calibration.cal_kit`).
 
-    For example::
+    The format (:data:`calibration.kit_format.KIT_FORMAT`), for example::
 
         {"name": "85033E", "z_ref_ohm": 50,
          "short": {"l0": 2.077, "l1": -108.5, "offset": {"delay_s": 31.8e-12,
@@ -142,8 +171,9 @@ def read_cal_kit(path: str | Path) -> CalKit:
          "open":  {"c0": 49.43, "c1": -310.1, "offset": {"delay_s": 29.2e-12}},
          "load":  {"resistance_ohm": 50.0}}
 
-    Omitted standards are ideal; unknown keys are refused (``file: key: message``), as is
-    malformed JSON (``file:line: message``).
+    Every standard must be named (``{}`` is an ideal, flush one), so that an empty or
+    mistyped file is not taken for the ideal kit; unknown keys are refused (``file: key:
+    message``), as is malformed JSON (``file:line: message``).
     """
     try:
         spec = json.loads(Path(path).read_text())
@@ -156,6 +186,12 @@ def read_cal_kit(path: str | Path) -> CalKit:
     for key, (cls, names) in _KIT_FIELDS.items():
         if key in spec:
             kwargs[key] = _standard(path, key, spec[key], cls, names)
+    missing = [key for key in _KIT_FIELDS if key not in spec]
+    if missing:
+        raise FileFormatError(
+            f"{path}: no {missing[0]!r} standard (give \"{missing[0]}\": {{}} for an ideal one; "
+            "the format: reach-cal import vna --help)"
+        )
     try:
         return CalKit(
             **kwargs,

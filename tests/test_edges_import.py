@@ -8,6 +8,7 @@ correction must return the reflections to the rounding of the arithmetic (1e-12)
 """
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -130,7 +131,7 @@ def test_gain_table_errors(tmp_path):
     with pytest.raises(FileFormatError, match=r"gain.txt:3: 'zz' is not a number"):
         read_gain_table(path)
     path.write_text("50 0.99\n60 1.2\n")
-    with pytest.raises(FileFormatError, match=r"gain.txt:2: power gain 1.2 is not in \(0, 1\]"):
+    with pytest.raises(FileFormatError, match=r"gain.txt:2: power gain 1.2 at 60 MHz is not in"):
         read_gain_table(path)
     path.write_text("50 0.99\n\n50 0.98\n")
     with pytest.raises(FileFormatError, match=r"gain.txt:3: frequencies must increase"):
@@ -140,6 +141,59 @@ def test_gain_table_errors(tmp_path):
     assert isinstance(loss, MeasuredLoss)
     with pytest.raises(InvalidDataError, match="covers 50-60 MHz, not the band"):
         loss.gain_at(np.array([55e6, 70e6]), np.zeros(2, complex))
+
+
+def test_gain_table_read_over_the_band_only(tmp_path):
+    """A table over the whole spectrum (edges-cal's ``hot_load_loss.txt``) whose model
+    exceeds 1 far outside the band: only the rows the band's interpolation uses count."""
+    rng = np.random.default_rng(18)
+    path = tmp_path / "hot_load_loss.txt"
+    for _ in range(10):
+        f = np.sort(rng.uniform(0, 200, 300))
+        lo, hi = np.sort(rng.uniform(45, 195, 2))
+        gain = np.where((f > lo - 5) & (f < hi + 5), rng.uniform(0.98, 1.0, f.size), 1.3)
+        rows = [f"{float(a)!r} {float(b)!r}" for a, b in zip(f, gain, strict=True)]
+        path.write_text("# freq, loss\n" + "\n".join(rows))
+        inside = (f >= lo) & (f <= hi)
+        if inside.sum() < 2 or f[0] > lo or f[-1] < hi:
+            continue
+        with pytest.raises(FileFormatError, match=r"hot_load_loss.txt:\d+: power gain 1.3 at "):
+            read_gain_table(path)
+        loss = read_gain_table(path, (lo, hi))
+        channels = np.linspace(lo, hi, 50) * 1e6
+        np.testing.assert_array_equal(
+            loss.gain_at(channels, np.zeros(50, complex)), np.interp(channels, f * 1e6, gain)
+        )
+        gain[np.flatnonzero(inside)[len(inside.nonzero()[0]) // 2]] = 1.01
+        rows = [f"{float(a)!r} {float(b)!r}" for a, b in zip(f, gain, strict=True)]
+        path.write_text("\n".join(rows))
+        with pytest.raises(FileFormatError, match=r"power gain 1.01 at [\d.]+ MHz"):
+            read_gain_table(path, (lo, hi))
+
+
+@needs_data
+def test_band_beyond_the_data_is_named_before_the_vna_is_blamed(tmp_path, today):
+    temps = {"amb": et.T_COLD_K, "hot": et.T_HOT_K, "open": et.T_COLD_K, "short": et.T_COLD_K}
+    with pytest.raises(InvalidDataError, match=r"s11_modelled.txt\) covers 50.0061-189.996 MHz; "
+                       r"--band 45,198 reaches beyond: give --band 50.01,189.99"):  # fmt: skip
+        import_edges(DATA, EdgesImport(temps, band_mhz=(45.0, 198.0)))
+    names = ("amb", "hot", "open", "short", "lna")
+    exports = {n: et.read_s11_csv(DATA / f"s11{n}.csv") for n in names}
+    f, g = exports["amb"]
+    short = {**exports, "amb": (f[f <= 110.5e6], g[f <= 110.5e6])}
+    with pytest.raises(InvalidDataError, match=r"S11 of amb \(the corrected reflections\) "
+                       r"covers 40-110.4 MHz; --band 50,190 reaches beyond: give --band 50,110.4"):
+        import_edges(DATA, EdgesImport(temps), short)
+    # a model used beyond its fit: |Gamma| > 1 from some frequency on is named, with the band
+    grown = {**exports, "amb": (f, np.where(f > 150e6, 1.39 * np.exp(1j * f / 1e7), g))}
+    with pytest.raises(InvalidDataError) as err:
+        import_edges(DATA, EdgesImport(temps), grown)
+    lines = str(err.value).splitlines()
+    assert len(lines) == 2
+    assert re.match(r"S11 of amb \(given\): \|Gamma\| reaches 1\.\d+ at 15\d\.\d+ MHz "
+                    r"\(>= 1 from 150\.\d+ MHz\)", lines[0])  # fmt: skip
+    assert re.match(r"if its data end there, give --band 50,1(49|50)\.\d+; else check the VNA",
+                    lines[1])  # fmt: skip
 
 
 def test_temperatures_must_name_every_load():
