@@ -20,7 +20,9 @@ so the thesis's conjugate machinery (eqs. 3.34-3.36, :mod:`calibration.conjugate
 unchanged to whitened rows. Because ``x`` holds the noiseless ``Q_0``, there is no
 errors-in-variables bias, and because ``w`` follows the radiometer equation, the estimate
 is efficient: its error reaches the Cramer-Rao floor (:mod:`calibration.noise_floor`).
-``T_NS`` is known to ~1e-5 after the first step, so two or three iterations converge.
+The iteration runs to a stated criterion (:mod:`calibration.convergence`): with the hot
+load among the calibrators two or three steps converge; calibrators spanning a few
+kelvin need more, and a step that raises the misfit is halved.
 
 Calibrator temperatures with a stated uncertainty (``SourceData.temperature_std_k``) have
 their per-source offset marginalised in the normal equations, so the posterior, the
@@ -56,6 +58,15 @@ from .averaging import MixturePosterior
 from .basis import BasisKind, PolynomialBasis
 from .blas_threads import with_one_blas_thread
 from .conjugate import CoefficientPrior, ScalePrior
+from .convergence import (
+    MAX_STEPS,
+    TOLERANCE,
+    ChiSquare,
+    Convergence,
+    curve_std,
+    damped,
+    relative_change,
+)
 from .correlated_reflections import shared_error_excess, widen
 from .data import CalibrationData
 from .errors import IllPosedError
@@ -208,14 +219,18 @@ def solve_radiometric(
     orders: OrderChoice | None = None,
     prior: RadiometricPrior | None = None,
     basis_kind: BasisKind = "legendre",
-    iterations: int = 2,
+    max_steps: int = MAX_STEPS,
     average: bool = True,
     allow_prior_dominated: bool = False,
 ) -> Solution:
     """Noise-wave parameters from the radiometer-noise likelihood of Q.
 
-    ``orders=None`` chooses the orders by evidence. ``iterations`` Gauss-Newton steps are
-    taken at the largest model before the search. ``average`` (with the default prior)
+    ``orders=None`` chooses the orders by evidence. Gauss-Newton steps are taken at the
+    largest model before the search until no parameter moves by more than
+    :data:`~calibration.convergence.TOLERANCE` of its posterior sd, at most
+    ``max_steps`` (:mod:`calibration.convergence`); ``metadata["convergence"]`` says how
+    it ended, and a fit that did not converge adds a sentence to ``metadata["warnings"]``
+    (the list of sentences a user should read). ``average`` (with the default prior)
     mixes the models by evidence; the solution's metadata lists the leading models and
     their weights either way.
 
@@ -224,6 +239,8 @@ def solve_radiometric(
     :class:`~calibration.identifiability.UndeterminedError` naming it and why, unless
     ``allow_prior_dominated`` (which also lets fixed orders exceed what the data constrain).
     """
+    if max_steps < 1:
+        raise ValueError("max_steps must be >= 1")
     choice = orders or OrderChoice()
     prior = prior or RadiometricPrior()
     if len(data.sources) < 2:
@@ -255,22 +272,41 @@ def solve_radiometric(
     cuts: list[tuple[Orders, Orders, str]] = []
 
     def linearised(largest: Orders) -> NormalEquations:
+        """Gauss-Newton at ``largest`` to :data:`~calibration.convergence.TOLERANCE`."""
         b = basis.matrix(data.freq_hz, max(largest))
+        r = ridge(largest)
+        record = Convergence()
+        convergence[0] = record
         # Limits raised (fit_extending): the last operating point is the better start.
-        warm = last.problem is not None and iterations > 0
-        if not warm:
+        if last.problem is not None:
+            theta = last.theta
+        else:
             # Start: the thesis's design (measured Q) with radiometer weights, T_NS ~ 1000 K.
             start = LinearisedProblem(terms.matrix(q), 1.0 / (terms.x_l**2 * 1e6 * var_q), temps)
-            normal = _normal_equations(start, b, largest, ridge(largest))
-        for step in range(iterations):
-            theta = last.theta if warm and step == 0 else operating_point(normal, b, largest)
+            theta = operating_point(_normal_equations(start, b, largest, r), b, largest)
+        while True:
             extra = reflection_variance(
                 theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
             )
             problem = linearise(terms, temps, q, var_q, theta, extra)
-            normal = _normal_equations(problem, b, largest, ridge(largest), offset_var)
+            normal = _normal_equations(problem, b, largest, r, offset_var)
             last.problem, last.theta, last.basis, last.largest = problem, theta, b, largest
-        return normal
+            record.steps += 1
+            proposal = operating_point(normal, b, largest)
+            record.change = relative_change(proposal, theta, curve_std(normal, r, b, largest))
+            record.history.append(record.change)
+            if record.change < TOLERANCE:
+                record.converged = True
+                return normal
+            if record.steps >= max_steps:
+                return normal
+            if not largest_physical[0]:  # the evidence's models: another objective
+                theta = proposal
+                continue
+            gain = terms.x_l * theta[INDEX["NS"]]
+            theta = damped(
+                theta, proposal, record, ChiSquare(terms, temps, q, problem.weights, gain)
+            )
 
     def build(largest: Orders) -> NormalEquations:
         """The normal equations at ``largest``, or within it.
@@ -302,7 +338,7 @@ def solve_radiometric(
                 last.problem = None
                 continue
             last.error_gram = None
-            if iterations == 0 or last.problem is None:
+            if last.problem is None:
                 return normal
             theta = last.theta
             errors = row_errors(
@@ -345,6 +381,7 @@ def solve_radiometric(
     # average as the smooth-function hypothesis (a model that takes T_NS through zero is
     # unphysical there, and it is what the fallback below steps around).
     largest_physical = [True]
+    convergence = [Convergence()]  # the last box's iteration
 
     def operating_point(normal: NormalEquations, b: FloatArray, largest: Orders) -> FloatArray:
         theta = evaluate_coefficients(normal.reference, b, largest)
@@ -373,6 +410,10 @@ def solve_radiometric(
         metadata["order_box_cuts"] = [
             {"asked": list(a), "kept": list(b), "why": why} for a, b, why in cuts
         ]
+    metadata["convergence"] = convergence[0].metadata()
+    warnings: list[str] = []
+    if (sentence := convergence[0].warning()) is not None:
+        warnings.append(sentence)
     if last.uncorrected_share is not None:
         metadata["reflection_errors_uncorrected"] = round(last.uncorrected_share, 4)
     shared = data.reflection_correlation_channels
@@ -403,4 +444,5 @@ def solve_radiometric(
     metadata["prior_dominated"] = check_determined(
         solution, data, coefficient_prior, allow_prior_dominated
     )
+    metadata["warnings"] = warnings
     return replace(solution, metadata=metadata)
