@@ -25,16 +25,16 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .averaging import (
-    SMOOTH_SHARE,
     join_hypotheses,
     mixture_posterior,
     pool_log_evidence,
     select_components,
+    smooth_prior_share,
     with_smooth_hypothesis,
 )
 from .conjugate import (
@@ -56,19 +56,26 @@ from .shrinkage import EvidenceGrid, ShrinkagePrior, marginal_log_evidence
 Prior = CoefficientPrior | ShrinkagePrior
 
 
+#: The search box of the default (automatic) choice: 8 terms a parameter, raised where
+#: the data ask for more (:func:`fit_extending`).
+DEFAULT_MAX_ORDERS: Orders = (8, 8, 8, 8, 8)
+
+
 @dataclass(frozen=True)
 class OrderChoice:
     """Fixed orders, or a search between ``min_orders`` and ``max_orders``.
 
-    When the evidence-best model reaches ``max_orders`` in some parameter, the data want
-    more terms than the search allowed: the limit of that parameter is raised by
-    ``extend_step`` and the search resumed, up to ``ceiling`` terms. A parameter still at
-    the ceiling is reported in the solution's metadata (``orders_at_ceiling``).
+    ``max_orders`` given is a limit, honoured: the search never goes beyond it (a
+    parameter that ends at it is reported in ``orders_at_ceiling``). Left out (``None``),
+    the box is automatic: it starts at :data:`DEFAULT_MAX_ORDERS`, and where the
+    evidence-best model reaches its edge in some parameter, that parameter's limit is
+    raised by ``extend_step`` and the search resumed, up to ``ceiling`` terms, only while
+    the calibrators constrain the raised terms (:func:`fit_extending` states the rule).
     """
 
     orders: Orders | None = None
     min_orders: Orders = (1, 1, 1, 1, 1)
-    max_orders: Orders = (8, 8, 8, 8, 8)
+    max_orders: Orders | None = None
     lookahead: int = 2
     extend_step: int = 4
     ceiling: int = 16
@@ -80,9 +87,21 @@ class OrderChoice:
         return cls(orders=o, min_orders=o, max_orders=o)
 
     @property
+    def limits(self) -> Orders:
+        """The search's upper limits: ``max_orders``, or the automatic box's start."""
+        if self.max_orders is not None:
+            return self.max_orders
+        return self.orders if self.orders is not None else DEFAULT_MAX_ORDERS
+
+    @property
+    def grows(self) -> bool:
+        """Whether the limits may be raised: only an automatic box (no ``max_orders``)."""
+        return self.orders is None and self.max_orders is None and self.extend_step > 0
+
+    @property
     def largest(self) -> Orders:
         """The largest model the normal equations must hold."""
-        return self.orders if self.orders is not None else self.max_orders
+        return self.orders if self.orders is not None else self.limits
 
 
 def check_constrained(normal: NormalEquations, orders: Orders, rcond: float = 1e-13) -> None:
@@ -186,9 +205,9 @@ def _fit(
     result = search_orders(
         log_evidence,
         choice.min_orders,
-        choice.max_orders,
+        choice.limits,
         starts=[
-            s for s in starts if all(n <= m for n, m in zip(s, choice.max_orders, strict=True))
+            s for s in starts if all(n <= m for n, m in zip(s, choice.limits, strict=True))
         ],
         lookahead=choice.lookahead,
     )
@@ -226,7 +245,7 @@ def _fit_every_model(
     The posterior is the evidence-weighted mixture (:mod:`calibration.averaging`) of the
     models that carry the weight, or the best one alone without ``average``.
     """
-    limits = zip(choice.min_orders, choice.max_orders, strict=True)
+    limits = zip(choice.min_orders, choice.limits, strict=True)
     models = [as_orders(m) for m in itertools.product(*(range(lo, hi + 1) for lo, hi in limits))]
     if len(models) > MAX_MODELS:
         raise ValueError(f"{len(models)} models between the order limits: at most {MAX_MODELS}")
@@ -305,11 +324,11 @@ def _fit_shrinkage(
     grids: dict[Orders, np.ndarray] = {}
     widths: ShrinkagePrior | ParameterScales = prior
     smooth_widths: ParameterScales | None = None  # set where the polynomials' are refitted
-    refitted_at: Orders = choice.max_orders  # ...at this model, their mode's
+    refitted_at: Orders = choice.limits  # ...at this model, their mode's
     # The largest box whose every model the data identify: the widths' and the smooth
     # hypothesis's model, and the climb's start (models beyond it are scored only where
     # identified, normal.admits).
-    full = choice.max_orders if normal.identified is None else normal.identified.box
+    full = choice.limits if normal.identified is None else normal.identified.box
     inner = normal if normal.identified is None else normal.within(full)
     if prior.per_parameter:
         widths, prior = fit_largest(inner, prior, scale_prior)  # prior: with that scale
@@ -341,7 +360,7 @@ def _fit_shrinkage(
         return log_evidences([orders])[0]
 
     def search(starts: Sequence[Orders]) -> tuple[Orders, dict[Orders, float]]:
-        lo, hi = choice.min_orders, choice.max_orders  # a raised limit starts at the last best
+        lo, hi = choice.min_orders, choice.limits  # a raised limit starts at the last best
         inside = [s for s in starts if all(n <= m for n, m in zip(s, hi, strict=True))]
         inside = inside or [significant_orders(inner, prior, lo, full)]
         result = search_orders_jointly(
@@ -392,7 +411,7 @@ def _fit_shrinkage(
             # too, and the best fixed point kept.
             assert isinstance(widths, ParameterScales)
             smooth_widths = first = widths
-            lo, hi = choice.min_orders, choice.max_orders
+            lo, hi = choice.min_orders, choice.limits
             spread = [_clipped((n,) * len(lo), lo, hi) for n in range(1, max(hi) + 1)]
             ends = {best} | {search([start])[0] for start in spread}
             settled = [settle(end, first, spread) for end in sorted(ends) if max(end) > 1]
@@ -441,7 +460,8 @@ def _fit_shrinkage(
         # A third hypothesis: smooth functions with a scale per parameter (marginalised),
         # at the smooth hypothesis's prior share, against the shared scale at even odds.
         draws = draw_scales(
-            normal, full, prior, scale_prior, grids[full], float(np.log(SMOOTH_SHARE))
+            normal, full, prior, scale_prior, grids[full],
+            float(np.log(smooth_prior_share(box))),
         )
         if draws is None:
             return mixture
@@ -468,7 +488,8 @@ def _hypotheses_with_own_widths(
     ``widths``; ``grids`` holds their evidences), every model of the box (``n_models``)
     equally likely; the smooth functions, ``full``, under the widths fitted at the largest
     model (the second), their own fit under that hypothesis. Prior
-    odds ``SMOOTH_SHARE : 1 - SMOOTH_SHARE`` between the two. ``occam`` is what
+    odds :func:`~calibration.averaging.smooth_prior_share` (that of one model of the box).
+    ``occam`` is what
     marginalising each hypothesis's widths adds to its evidence
     (:func:`~calibration.scale_fit.log_occam`, at the model where the polynomials' widths
     were refitted and at ``full``).
@@ -488,7 +509,8 @@ def _hypotheses_with_own_widths(
     )
     variances = widths[1].variances(full)[0]
     smooth = solve(normal, full, np.zeros_like(variances), variances, scale_prior)
-    odds = float(np.log(SMOOTH_SHARE / (1.0 - SMOOTH_SHARE)))
+    share = smooth_prior_share(n_models)
+    odds = float(np.log(share / (1.0 - share)))
     return join_hypotheses(
         mixture, pool_log_evidence(polynomials), [smooth],
         np.array([smooth.log_evidence + odds + occam[1]]),
@@ -537,89 +559,5 @@ def _constrained(normal: NormalEquations, orders: Orders) -> bool:
     return True
 
 
-@dataclass(frozen=True)
-class FitResult:
-    """A fit with its evidence table, the normal equations it used and the order limits."""
-
-    posterior: LinearPosterior
-    table: dict[Orders, float]
-    normal: NormalEquations
-    max_orders: Orders
-    at_ceiling: tuple[str, ...]
-    skipped: dict[Orders, str]
-
-    def limits_metadata(self) -> dict[str, object]:
-        """The order limits searched, the parameters left at the ceiling, models skipped."""
-        return {
-            "order_limits": list(self.max_orders),
-            "orders_at_ceiling": list(self.at_ceiling),
-            "skipped_models": [
-                {"orders": list(o), "reason": r} for o, r in self.skipped.items()
-            ],
-        }
-
-
-def fit_extending(
-    build: Callable[[Orders], NormalEquations],
-    choice: OrderChoice,
-    prior: Prior,
-    prior_variance_scale: float,
-    scale_prior: ScalePrior | None,
-    allow_prior_dominated: bool = False,
-    average: bool = True,
-    smooth: Callable[[], bool] = lambda: True,
-) -> FitResult:
-    """:func:`fit` on ``build(max_orders)``, raising limits the evidence runs into.
-
-    ``build`` makes the normal equations for given largest orders (the solvers' likelihood),
-    or for smaller ones where the data identify no more (their ``max_orders``): a
-    parameter cut so is not raised again.
-    With a :class:`ShrinkagePrior` the evidence table is that of the last normal
-    equations alone, so that every entry is computed the same way. ``smooth()``, asked
-    after each ``build``, says whether the smooth-function hypothesis may join (:func:`fit`).
-    """
-    from .noise_waves import PARAMETERS
-
-    largest = choice.largest
-    table: dict[Orders, float] = {}
-    best: tuple[Orders, ...] = ()
-    capped: set[int] = set()  # parameters a build cut below what it was asked for
-    while True:
-        normal = build(largest)
-        asked, largest = largest, normal.max_orders
-        kept = normal.identified.box if normal.identified is not None else largest
-        capped |= {k for k, (n, m) in enumerate(zip(kept, asked, strict=True)) if n < m}
-        skipped: dict[Orders, str] = {}
-        posterior, part = _fit(
-            normal,
-            replace(choice, max_orders=largest) if choice.orders is None else choice,
-            prior,
-            prior_variance_scale,
-            scale_prior,
-            allow_prior_dominated,
-            starts=best,
-            average=average,
-            skipped=skipped,
-            smooth=smooth(),  # asked after build(): it may depend on the new equations
-        )
-        if isinstance(prior, ShrinkagePrior):
-            table = dict(part)
-        else:
-            table.update(part)
-        chosen = max(part, key=part.__getitem__)
-        best = (chosen,)
-        hit = [
-            k
-            for k, (n, m) in enumerate(zip(chosen, largest, strict=True))
-            if n == m and choice.orders is None
-        ]
-        grow = [k for k in hit if largest[k] < choice.ceiling and k not in capped]
-        if not grow:
-            names = tuple(PARAMETERS[k] for k in hit)
-            return FitResult(posterior(), table, normal, largest, names, skipped)
-        largest = as_orders(
-            [
-                min(m + choice.extend_step, choice.ceiling) if k in grow else m
-                for k, m in enumerate(largest)
-            ]
-        )
+# fit_extending grows the automatic box and records the model used (calibration.model_size).
+from .model_size import FitResult, fit_extending  # noqa: E402, F401

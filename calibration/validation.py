@@ -28,6 +28,7 @@ from scipy import stats
 
 from .data import CalibrationData
 from .errors import CalibrationError
+from .model_checks import fit_warnings
 from .solution import Solution
 from .solvers import AnySolution
 
@@ -91,6 +92,14 @@ class LeaveOneOutReport:
                 f"{r.inside_95:>7.3f}  {','.join(map(str, r.orders))}"
             )
         return rows
+
+    def warnings(self, solution: object | None = None) -> list[str]:
+        """Warnings: held-out errors far from their prediction (and ``solution``'s own).
+
+        :func:`calibration.model_checks.fit_warnings`: with ``solution``, also its noise
+        scale far from 1 and orders at their limit.
+        """
+        return fit_warnings(solution, loo=self)
 
 
 def _rms(values: FloatArray) -> float:

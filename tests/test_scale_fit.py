@@ -188,13 +188,14 @@ def test_own_widths_for_each_hypothesis_reduce_to_the_shared_pool(eight_cal_norm
     """With the same widths for both hypotheses, the polynomials-and-smooth mixture built
     hypothesis by hypothesis is the one pool of :func:`with_smooth_hypothesis`: the same
     weights, mean and covariance (to the share noted below). The polynomials' evidences
-    are set about log(box) above the largest model's (its own as the smooth component is
-    solved), so that both hypotheses and several orders carry weight."""
+    are set near the largest model's (its own as the smooth component is solved): the
+    smooth functions have one model's prior (averaging.smooth_prior_share), so that both
+    hypotheses and several orders carry weight."""
     normal = eight_cal_normal
     scales = ParameterScales((3.0, 0.05, 0.8, 20.0, 1e-3), 0.5, 3000.0)
     full, box = normal.max_orders, 6**5
-    lifts = {(2, 1, 2, 3, 1): 9.0, (2, 2, 2, 3, 1): 8.6, (3, 1, 2, 3, 2): 9.6,
-             (4, 2, 3, 3, 1): 8.2, full: 0.0}
+    lifts = {(2, 1, 2, 3, 1): 0.4, (2, 2, 2, 3, 1): 0.0, (3, 1, 2, 3, 2): 1.0,
+             (4, 2, 3, 3, 1): -0.4, full: 0.0}
     variances = scales.variances(full)[0]  # as the smooth component is solved
     z_full = solve(normal, full, np.zeros_like(variances), variances, None).log_evidence
     grids = {m: np.array([z_full + lift]) for m, lift in lifts.items()}
@@ -202,8 +203,8 @@ def test_own_widths_for_each_hypothesis_reduce_to_the_shared_pool(eight_cal_norm
     pooled = mixture_posterior(
         normal, select_components(with_smooth_hypothesis(grids, full, box)), scales, None, 0.0
     )
-    # Equal to about 1 / box: the polynomials' pool alone leaves out the largest model's
-    # own polynomial share (e^-9 of that pool, below averaging.MASS); the pool merges it.
+    # Equal to about 1 / box: the two ways count the largest model's own polynomial share
+    # alike (one model's prior), up to the components averaging.MASS leaves out.
     assert pooled.model_weights() == pytest.approx(joined.model_weights(), abs=1e-4)
     assert min(pooled.model_weights().values()) > 0.01  # every model carries weight
     np.testing.assert_allclose(joined.mean, pooled.mean, rtol=1e-3)
