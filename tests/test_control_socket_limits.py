@@ -326,7 +326,7 @@ def test_out_of_descriptors_the_server_waits_drops_an_idle_client_and_goes_on(so
 CLIENT_AS = """\
 import contextlib, io, json, os, sys
 from pathlib import Path
-from reach_receiver.cli import remote
+from reach_receiver.cli import steer
 from reach_receiver.daemon.client import DaemonClient, daemon_answers
 uid, gid = int(sys.argv[1]), int(sys.argv[2])
 os.setgroups([])
@@ -335,7 +335,7 @@ os.setuid(uid)
 for path in map(Path, sys.argv[3:]):
     said = io.StringIO()
     with contextlib.redirect_stderr(said):
-        code = remote.steer(DaemonClient(path), "status")
+        code = steer.request(DaemonClient(path), "status", every=True)
     print(json.dumps({"answers": daemon_answers(path), "code": code, "said": said.getvalue()}))
 """
 
@@ -366,7 +366,7 @@ def test_a_user_outside_the_group_is_told_it_is_refused():
         assert answer["answers"] is True  # a daemon is there, not "no daemon answers"
         assert answer["code"] == 1
         message = answer["said"].strip()
-        assert message.startswith("reach-run: refused: not a member of the service's group")
+        assert message.startswith("reach-run status: refused: not a member of the service's group")
         assert told_by in message
 
 

@@ -25,7 +25,7 @@ import urllib.request
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from reach_receiver.cli import remote
+from reach_receiver.cli import steer
 from reach_receiver.config.daemon import DaemonSettings
 from reach_receiver.config.monitoring import DEFAULT_ALARMS, AlarmRule, MonitoringSettings
 from reach_receiver.config.site import replace_devices
@@ -233,7 +233,7 @@ def test_status_shows_the_raised_alarm_and_the_latest_readings(idle_daemon, caps
         until(lambda: alarm_id in board.active, timeout_s=30)
         until(lambda: "health alarm: TEC reports" in reachd._status, timeout_s=10)  # systemd's
         with DaemonClient(reachd.dirs.runtime / SOCKET_FILE) as client:
-            assert remote.steer(client, "status") == 0
+            assert steer.request(client, "status", every=True) == 0
             health = client.request("status")["health"]
         (detail,) = health["alarm_details"]
         assert (detail["id"], detail["series"]) == (alarm_id, "reach_tec_fault_bits")

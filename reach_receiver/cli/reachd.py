@@ -59,7 +59,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--compression", type=float, default=None,
                    help="--sim: simulated seconds per real second (the simulator's default)")
     p.add_argument("--seed", type=int, default=0, help="--sim: seed of the simulation")
-    p.add_argument("-v", "--verbose", action="store_true", help="log at INFO on standard error")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="log more: INFO on a terminal (default WARNING), DEBUG under the "
+                   "journal (default INFO: every read request too)")
     add_version(p)
     return p
 

@@ -1,4 +1,4 @@
-"""``reach-run`` as a client of the daemon: submit, follow, detach, re-attach, steer.
+"""``reach-run`` as a client of the daemon: submit, follow, detach, re-attach (requests: .steer).
 
 When ``reachd`` owns the hardware (its control socket answers in the site's runtime
 directory), ``reach-run schedule.yaml`` checks the schedule locally, sends it with every
@@ -28,7 +28,7 @@ from reach_receiver.daemon.protocol import Closed, ControlError
 from reach_receiver.run.progress_lines import step_lines, update_line
 from reach_receiver.schedule.steps import Schedule
 
-from .health import format_health
+from .steer import unreached
 
 
 def submit(client: DaemonClient, schedule: Schedule, path: str, detach: bool) -> int:
@@ -36,7 +36,7 @@ def submit(client: DaemonClient, schedule: Schedule, path: str, detach: bool) ->
     try:
         answer = client.request("submit", schedule=path, files=dict(schedule.files))
     except (Closed, OSError) as err:
-        print(f"reach-run: {_unreached(client, err)}", file=sys.stderr)
+        print(f"reach-run: {unreached(client, err)}", file=sys.stderr)
         return 1
     except ControlError as err:
         print(f"reach-run: the daemon refused {path}: {err}", file=sys.stderr)
@@ -74,7 +74,7 @@ def follow(client: DaemonClient, job: int | None) -> int:
         print(f"\ndetached from job {which}; it goes on. Again: reach-run --attach {which}")
         return 0
     except (ControlError, OSError) as err:
-        print(f"reach-run: {_unreached(client, err)}", file=sys.stderr)
+        print(f"reach-run: {unreached(client, err)}", file=sys.stderr)
         return 1
     return 0 if state == "completed" else 1
 
@@ -123,34 +123,3 @@ def _print(event: dict[str, Any]) -> None:
 
 def _err(lines: list[str]) -> None:
     print("\n".join(lines), file=sys.stderr, flush=True)
-
-
-def steer(client: DaemonClient, op: str, **fields: Any) -> int:
-    """One request (status, queue, cancel, abort, resume), its reply printed."""
-    try:
-        answer = client.request(op, **fields)
-    except (ControlError, OSError) as err:
-        print(f"reach-run: {_unreached(client, err)}", file=sys.stderr)
-        return 1
-    if op == "status":
-        print(answer["status"])
-        if answer["queue"]:
-            print(f"queued: {', '.join(map(str, answer['queue']))}")
-        for name, at in sorted(answer.get("timers", {}).items()):
-            print(f"timer {name}: next at {at:.0f} (Unix s)")
-        for line in format_health(answer.get("health")):
-            print(line)
-    elif op == "queue":
-        for job in answer["jobs"]:
-            line = f"{job['id']:>5} {job['state']:<11} {job['name']}  {job['origin']}"
-            print(f"{line}  {job['reason']}".rstrip())
-    else:
-        print(f"{op}: done" + (f" (job {answer['job']['id']})" if answer.get("job") else ""))
-    return 0
-
-
-def _unreached(client: DaemonClient, err: Exception) -> str:
-    """What went wrong with the daemon, as a user reads it (an ``OSError`` named)."""
-    if isinstance(err, OSError):
-        return f"the daemon at {client.path} cannot be reached: {err.strerror or err}"
-    return str(err)

@@ -21,7 +21,8 @@ op             request fields                                  reply fields (``o
                                                                cooperatively
 ``abort``      none                                            ``job``: the running job stops
                                                                now, the front-end goes safe;
-                                                               the queue is paused
+                                                               the queue is paused (refused
+                                                               once the job is closing)
 ``resume``     none                                            the queue runs again (after
                                                                ``abort``, or a fault)
 ``follow``     ``job`` (id, default the current or next one)    a stream: one ``event`` per
