@@ -10,7 +10,7 @@ pipeline's modelled S11s). What differs between runs is given, not assumed:
 * the S11s: the pipeline's models, splines through the VNA exports, or reflections the
   caller supplies (e.g. raw VNA readings corrected by :mod:`calibration.vna_import`);
 * the loss of the cable between the hot load and its S11 plane: a measured power-gain
-  table (:func:`read_gain_table`, read over the band only), the EDGES cable model
+  table (:func:`read_gain_table`, judged over the band only), the EDGES cable model
   (:class:`CableLoss`), or none;
 * the path between the plane the receiver's reflection was read at and the calibrators'
   plane (:mod:`calibration.receiver_path`, eq. 4.7): a two-port file, a cable model, or
@@ -95,20 +95,41 @@ class EdgesLayout:
 
 @dataclass(frozen=True)
 class MeasuredLoss:
-    """A measured power-gain table of the hot load's cable, linear in frequency between rows."""
+    """A measured power-gain table of the hot load's cable, linear in frequency between rows.
+
+    ``lines`` holds each row's line in the file ``origin``, for messages.
+    """
 
     freq_hz: FloatArray
     gain: FloatArray
     origin: str = "table"
+    lines: tuple[int, ...] = ()
 
     def gain_at(self, freq_hz: FloatArray, gamma_load: ComplexArray) -> FloatArray:
-        """``G(f)`` on ``freq_hz`` by linear interpolation; refuses to extrapolate."""
+        """``G(f)`` on ``freq_hz`` by linear interpolation; refuses to extrapolate.
+
+        Only the rows the interpolation uses must hold a gain in ``(0, 1]`` (a published
+        table, edges-cal's ``hot_load_loss.txt``, runs over the whole spectrum, and its
+        model gives gains above 1 far outside the fit band, e.g. at 40 MHz for a 50-190
+        MHz fit); a used row that does not is refused as ``file:line: ... at F MHz``.
+        """
         del gamma_load  # a measured gain already holds the load's mismatch
         lo, hi = self.freq_hz[0], self.freq_hz[-1]
         if freq_hz[0] < lo - _MATCH_HZ or freq_hz[-1] > hi + _MATCH_HZ:
             raise InvalidDataError(
                 f"{self.origin}: the gain table covers {lo / 1e6:.6g}-{hi / 1e6:.6g} MHz, "
                 f"not the band {freq_hz[0] / 1e6:.6g}-{freq_hz[-1] / 1e6:.6g} MHz"
+            )
+        below = np.clip(np.searchsorted(self.freq_hz, freq_hz, "right") - 1, 0, None)
+        on_row = np.abs(self.freq_hz[below] - freq_hz) <= _MATCH_HZ
+        used = np.union1d(below, np.minimum(below[~on_row] + 1, self.freq_hz.size - 1))
+        bad = used[~((self.gain[used] > 0) & (self.gain[used] <= 1))]
+        if bad.size:
+            i = int(bad[0])
+            where = f"{self.origin}:{self.lines[i]}" if self.lines else self.origin
+            raise InvalidDataError(
+                f"{where}: power gain {self.gain[i]:g} at {self.freq_hz[i] / 1e6:g} MHz is not "
+                "in (0, 1]: a passive cable neither amplifies nor blocks"
             )
         return np.asarray(np.interp(freq_hz, self.freq_hz, self.gain), dtype=float)
 
@@ -131,37 +152,20 @@ class CableLoss:
         return coax_power_gain(freq_hz, gamma_load, self.cable)
 
 
-def read_gain_table(
-    path: str | Path, band_mhz: tuple[float, float] | None = None
-) -> MeasuredLoss:
+def read_gain_table(path: str | Path) -> MeasuredLoss:
     """A power-gain table: rows ``freq_MHz gain`` (whitespace or commas, ``#`` comments).
 
-    Frequencies must increase. With ``band_mhz`` only the rows inside the band are used,
-    with the one row beyond each edge that linear interpolation needs (a published table,
-    edges-cal's ``hot_load_loss.txt``, runs over the whole spectrum, and its model gives
-    gains above 1 far outside the fit band, e.g. at 40 MHz for a 50-190 MHz fit). A row
-    used whose gain is not in ``(0, 1]`` is refused as ``file:line: ... at F MHz``.
+    Frequencies must increase; gains are judged where they are used, over the band
+    (:meth:`MeasuredLoss.gain_at`).
     """
     table, lines = read_rows(path, 2)
     freq_hz, gain = table[:, 0] * 1e6, table[:, 1]
     step = np.flatnonzero(np.diff(freq_hz) <= 0)
     if step.size:
         raise FileFormatError(f"{path}:{lines[step[0] + 1]}: frequencies must increase")
-    keep = np.arange(freq_hz.size)
-    if band_mhz is not None:
-        lo = max(int(np.searchsorted(freq_hz, band_mhz[0] * 1e6 - _MATCH_HZ, "right")) - 1, 0)
-        hi = int(np.searchsorted(freq_hz, band_mhz[1] * 1e6 + _MATCH_HZ, "left")) + 1
-        keep = keep[lo:hi]
-    bad = [i for i in keep if not 0 < gain[i] <= 1]
-    if bad:
-        i = bad[0]
-        raise FileFormatError(
-            f"{path}:{lines[i]}: power gain {gain[i]:g} at {freq_hz[i] / 1e6:g} MHz is not in "
-            "(0, 1]: a passive cable neither amplifies nor blocks"
-        )
-    if keep.size < 2:
-        raise FileFormatError(f"{path}: a gain table needs at least two rows over the band")
-    return MeasuredLoss(freq_hz[keep], gain[keep], str(path))
+    if freq_hz.size < 2:
+        raise FileFormatError(f"{path}: a gain table needs at least two rows")
+    return MeasuredLoss(freq_hz, gain, str(path), tuple(int(n) for n in lines))
 
 
 @dataclass(frozen=True)

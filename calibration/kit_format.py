@@ -15,9 +15,9 @@ KIT_EXAMPLE = """{"name": "edges3", "z_ref_ohm": 50,
 
 KIT_FORMAT = f"""kit file (--kit, JSON): "short", "open" and "load" are required ({{}} is that
 standard ideal and flush); "name" and "z_ref_ohm" (ohm, default 50) optional.
-  short: l0 pH, l1 1e-24 H/Hz, l2 1e-33 H/Hz^2, l3 1e-42 H/Hz^3 (inductance; default 0)
-  open:  c0 fF, c1 1e-27 F/Hz, c2 1e-36 F/Hz^2, c3 1e-45 F/Hz^3 (capacitance; default 0)
-  load:  resistance_ohm (default 50)
-  each may hold "offset": delay_s (one-way, s), loss_gohm_per_s (Gohm/s at 1 GHz),
-  z0_ohm (default 50). Unknown keys are refused. EDGES-3's kit, for example:
+  short: inductance l0 pH, l1 1e-24 H/Hz, l2 1e-33 H/Hz^2, l3 1e-42 H/Hz^3
+  open:  capacitance c0 fF, c1 1e-27 F/Hz, c2 1e-36 F/Hz^2, c3 1e-45 F/Hz^3
+  load:  resistance_ohm (default 50); every coefficient defaults to 0
+  each may hold "offset": delay_s (one-way, s), loss_gohm_per_s (Gohm/s at
+  1 GHz), z0_ohm (default 50). Unknown keys are refused. EDGES-3's kit:
 {KIT_EXAMPLE}"""

@@ -31,7 +31,9 @@ def changed_run(run_file, out, name, **fields):
     data, extra = read_run(run_file)
     source = data.sources[name]
     new = replace(source, **{k: f(source) for k, f in fields.items()})
-    write_run(out, replace(data, sources={**data.sources, name: new}), extra)
+    # a simulation of REACH's NC346A diode, as reach-cal simulate writes it
+    attrs = {"noise_source_model": "NC346A"}
+    write_run(out, replace(data, sources={**data.sources, name: new}), extra, attrs=attrs)
     return out
 
 

@@ -57,9 +57,10 @@ def test_help_and_version_import_nothing_heavy(main, argv):
     assert found["heavy"] == []
 
 
-#: reach-cal's parsers: the package, its constants and errors, and the cli's parser modules.
+#: reach-cal's parsers: the package, its constants and errors, and the cli's parser modules
+#: (with the kit file's format, text that import's --help prints).
 CAL_PARSER = ("calibration.errors", "calibration.cli", "calibration.cli.main",
-              "calibration.cli.args", "calibration.cli.import_parser")
+              "calibration.cli.args", "calibration.cli.import_parser", "calibration.kit_format")
 
 
 @pytest.mark.parametrize("argv", [

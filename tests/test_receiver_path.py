@@ -12,15 +12,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.interpolate import CubicSpline
 
 from calibration import edges_text as et
+from calibration.cli import main
 from calibration.errors import InvalidDataError
+from calibration.hdf5_io import read_run
 from calibration.receiver_path import (
     EDGES3_RECEIVER_CABLE,
     ReceiverCable,
     read_measured_path,
 )
-from calibration.touchstone import TouchstoneData, write_touchstone_network
+from calibration.touchstone import TouchstoneData, read_touchstone, write_touchstone_network
 from calibration.vna_import import (
     KIT_EXAMPLE,
     VnaLayout,
@@ -133,3 +136,67 @@ def test_kit_file_names_what_is_missing_or_unknown(tmp_path):
     path.write_text(json.dumps({"short": {}, "open": {}, "load": {}}))
     ideal = read_cal_kit(path).reflections(np.array([1e8]))
     np.testing.assert_array_equal(ideal[:, 0], [-1, 1, 0])
+
+
+# --- the command line: reach-cal import edges --vna / import vna on the real readings ---
+
+VNA_ARGS = [
+    "--vna", str(VNA), "--device", PREFIX + "{name}.s1p",
+    "--standards", ",".join(f"{k}={v}" for k, v in CALIBRATORS_STANDARDS.items()),
+    "--standards-for", "lna:" + ",".join(f"{k}={v}" for k, v in RECEIVER_STANDARDS.items()),
+]  # fmt: skip
+
+
+def import_vna_run(tmp_path, *extra):
+    (tmp_path / "kit.json").write_text(KIT_EXAMPLE)
+    out = tmp_path / "run.h5"
+    out.unlink(missing_ok=True)
+    status = main([
+        "import", "edges", str(RUN), "-o", str(out), "--hot-cable", "ut141c",
+        "--temperatures", "amb=306.5,hot=393.22,open=306.5,short=306.5",
+        "--kit", str(tmp_path / "kit.json"), *VNA_ARGS, *extra,
+    ])  # fmt: skip
+    return status, out
+
+
+@needs_data
+def test_cli_import_edges_vna_moves_the_receiver_or_refuses(tmp_path, capsys):
+    status, _ = import_vna_run(tmp_path)
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2  # refused in two lines, naming the options
+    assert err[0].startswith("reach-cal: error: the receiver 'lna' is read with its own")
+    assert "--receiver-cable" in err[1]
+    assert not (tmp_path / "run.h5").exists()
+
+    def spline(name, freq):
+        f, g = et.read_s11_csv(RUN / name)
+        return CubicSpline(f, g)(freq)
+
+    for option, expected, tol in (
+        (("--receiver-cable", "edges3"), "s11lna.csv", PATH_TOL),
+        (("--receiver-cable", "length_m=0.108204,eps_pct=-1.24,sigma_pct=-91.5"), "s11lna.csv",
+         PATH_TOL),
+        (("--receiver-path", "none"), "s11.csv", RECEIVER_TOL),
+    ):  # fmt: skip
+        status, run = import_vna_run(tmp_path, *option)
+        assert status == 0, capsys.readouterr().err
+        out = capsys.readouterr().out
+        assert ("moved to the loads' plane" in out) == (option[1] != "none")
+        data, _ = read_run(run)
+        assert np.max(np.abs(data.gamma_rec - spline(expected, data.freq_hz))) < tol, option
+        for name in data.names:
+            gamma = spline(f"s11{name}.csv", data.freq_hz)
+            assert np.max(np.abs(data.sources[name].gamma - gamma)) < LOADS_TOL, name
+
+
+@needs_data
+def test_cli_import_vna_reproduces_the_corrected_files(tmp_path, capsys):
+    (tmp_path / "kit.json").write_text(KIT_EXAMPLE)
+    args = ["import", "vna", str(VNA), "-o", str(tmp_path / "out"), "--devices",
+            ",".join((*LOADS, "lna")), "--kit", str(tmp_path / "kit.json"), *VNA_ARGS[2:]]
+    assert main(args) == 0, capsys.readouterr().err
+    for name in (*LOADS, "lna"):
+        _, g, _ = read_touchstone(tmp_path / "out" / f"{name}.s1p")
+        _, g_csv = et.read_s11_csv(RUN / ("s11.csv" if name == "lna" else f"s11{name}.csv"))
+        assert np.max(np.abs(g - g_csv)) < (RECEIVER_TOL if name == "lna" else LOADS_TOL), name

@@ -19,7 +19,9 @@ against the others (:mod:`calibration.consistency`), and ``--exclude-inconsisten
 also excludes the calibrator it names and checks again, at most ``N`` times (default 2),
 and solves without them. After the solve, :func:`noise_source_line` holds the fitted
 ``T_NS`` to the noise diode's ENR table (:func:`calibration.measurement_uncertainty.
-check_noise_source`): PASS or FAIL, also in ``reach-cal summary``.
+check_noise_source`): PASS or FAIL, also in ``reach-cal summary``; only for a run whose
+root attribute ``noise_source_model`` is ``"NC346A"`` (:mod:`calibration.hdf5_io`), the
+diode the table describes; other runs (EDGES imports) get one line saying why not.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from numpy.typing import NDArray
 from ..consistency import check_consistency, exclude_inconsistent
 from ..data import CalibrationData
 from ..errors import CalibrationError
+from ..hdf5_io import NC346A, run_noise_source_model
 from ..measurement_uncertainty import check_noise_source
 from ..noise_waves import INDEX
 from ..preparation import excision_flags, smooth_reflection, smoothing_width_hz
@@ -133,12 +136,28 @@ def corrected_solve(
     return data, solve(data), meta
 
 
-def noise_source_line(solution: AnySolution, freq_hz: NDArray[np.float64] | None = None) -> str:
+def noise_source_line(
+    solution: AnySolution,
+    freq_hz: NDArray[np.float64] | None = None,
+    run: str | None = None,
+) -> str:
     """The fitted ``T_NS`` against the NC346A's ENR table (thesis fig. 4.20), PASS/FAIL.
 
-    ``freq_hz`` defaults to 201 points over the solution's band; the table covers
-    30-200 MHz, outside which the check is not made.
+    Only when the run (``run``, else the solution's ``run_file``) names its noise source
+    ``NC346A``; otherwise one line saying it was not checked and why. ``freq_hz``
+    defaults to 201 points over the solution's band; the table covers 30-200 MHz,
+    outside which the check is not made.
     """
+    run = run or solution.metadata.get("run_file")
+    if not run:
+        return "noise source: not checked, no run file names its noise source"
+    try:
+        model = run_noise_source_model(run)
+    except (OSError, CalibrationError) as err:
+        return f"noise source: not checked, the run {run} is not readable ({err})"
+    if model != NC346A:
+        said = f"is {model!r}" if model else "is not recorded (e.g. an import)"
+        return f"noise source: not checked, the run's noise source {said}, not the {NC346A}"
     f = np.linspace(*band_hz(solution), 201) if freq_hz is None else freq_hz
     lo, hi = min(NC346A_ENR_DB) * 1e6, max(NC346A_ENR_DB) * 1e6
     if f[0] < lo or f[-1] > hi:

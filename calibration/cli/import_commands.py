@@ -7,9 +7,10 @@
                      [--spectrum 'sp{name}.txt'] [--s11-export 's11{name}.csv']
                      [--s11-modelled s11_modelled.txt] [--s11 modelled|raw]
                      [--hot-loss GAIN.txt | --hot-cable ut141c|KEY=V,...]
-                     [--hot-load hot] [--cable-load amb] [--band LO HI]
+                     [--hot-load hot] [--cable-load amb] [--band LO,HI]
                      [--q-variance empirical|radiometer] [--integration-s S]
                      [--vna VNA_DIR [VNA options]]
+                     [--receiver-cable edges3|length_m=M,... | --receiver-path FILE.s2p|none]
     reach-cal import vna VNA_DIR -o OUT_DIR --devices a,b,... [VNA options]
 
     VNA options: [--kit KIT.json] [--device '{name}.s1p']
@@ -19,7 +20,11 @@
 :func:`calibration.hdf5_io.write_run`, so ``solve``, ``apply``, ``summary`` and ``validate``
 read it. With ``--vna`` its S11s are the raw VNA exports of every load and the receiver,
 corrected with their standards (:mod:`calibration.vna_import`). ``import vna`` writes those
-corrected reflections as ``OUT_DIR/{name}.s1p``. Patterns take ``{name}`` and shell
+corrected reflections as ``OUT_DIR/{name}.s1p``. A receiver with standards of its own is
+read at another plane than the loads: its path to theirs (:mod:`calibration.receiver_path`)
+must be given, or the planes said to coincide (``--receiver-path none``), else the import is
+refused. The run file's root attribute ``power_spectra = "placeholder"`` marks its powers
+as stand-ins (:mod:`calibration.hdf5_io`). Patterns take ``{name}`` and shell
 wildcards, relative to the directory read; each must match one file. Bad input is
 reported as ``file:line: message`` (or ``file: message``), exit status 2.
 """
@@ -43,9 +48,15 @@ from ..edges_import import (
 )
 from ..edges_text import UT141C
 from ..errors import InvalidDataError
-from ..hdf5_io import write_run
+from ..hdf5_io import PLACEHOLDER_POWERS, write_run
+from ..receiver_path import (
+    EDGES3_RECEIVER_CABLE,
+    ReceiverCable,
+    ReceiverPath,
+    read_measured_path,
+)
 from ..touchstone import write_touchstone
-from ..vna_import import VnaLayout, correct_exports, read_cal_kit
+from ..vna_import import VnaLayout, check_receiver_plane, correct_exports, read_cal_kit
 from .files import check_outputs, same_file
 
 __all__ = ["cmd_import_edges", "cmd_import_vna"]
@@ -68,13 +79,27 @@ def _vna_layout(args: argparse.Namespace) -> VnaLayout:
     )
 
 
+def _receiver_path(args: argparse.Namespace) -> ReceiverPath | None:
+    if args.receiver_cable is not None:
+        if not args.receiver_cable:
+            return EDGES3_RECEIVER_CABLE
+        try:
+            return ReceiverCable(**args.receiver_cable)
+        except InvalidDataError as err:
+            raise InvalidDataError(f"--receiver-cable: {err}") from None
+    if args.receiver_path is None or args.receiver_path.strip().lower() == "none":
+        return None
+    return read_measured_path(args.receiver_path)
+
+
 def _kit(args: argparse.Namespace) -> CalKit:
     return read_cal_kit(args.kit) if args.kit else IDEAL_KIT
 
 
 def cmd_import_edges(args: argparse.Namespace) -> int:
     """Import an EDGES text run (spectra, S11s, temperatures) into a run file (HDF5)."""
-    inputs = [args.directory, args.hot_loss, args.vna, args.kit]
+    path_file = args.receiver_path if (args.receiver_path or "none").lower() != "none" else None
+    inputs = [args.directory, args.hot_loss, args.vna, args.kit, path_file]
     check_outputs({"-o": (args.output, "run")}, inputs, remakes=str(args.directory))
     if not args.band[0] < args.band[1]:
         raise InvalidDataError(f"--band needs LO < HI (MHz), got {args.band[0]:g} {args.band[1]:g}")
@@ -89,6 +114,7 @@ def cmd_import_edges(args: argparse.Namespace) -> int:
         loss = _cable(args.hot_cable)
     if args.hot_loss:
         loss = read_gain_table(args.hot_loss)
+    receiver_path = _receiver_path(args)
     spec = EdgesImport(
         temperatures_k=args.temperatures,
         layout=layout,
@@ -99,19 +125,28 @@ def cmd_import_edges(args: argparse.Namespace) -> int:
         lossy_load=args.hot_load,
         cable_load=args.cable_load,
         integration_per_position_s=args.integration_s,
+        receiver_path=receiver_path,
     )
     reflections = None
     if args.vna:
         names = (*layout.loads, layout.receiver)
-        reflections = correct_exports(args.vna, names, _vna_layout(args), _kit(args))
+        vna_layout = _vna_layout(args)
+        check_receiver_plane(
+            vna_layout, layout.receiver, receiver_path is not None, args.receiver_path is not None
+        )
+        reflections = correct_exports(args.vna, names, vna_layout, _kit(args))
     data = import_edges(args.directory, spec, reflections)
-    write_run(args.output, data, attrs={"imported_from": str(args.directory)})
+    # the spectra are T* stand-ins (P_load = 300, P_NS = 1300): no measured powers, no diode
+    attrs = {"imported_from": str(args.directory), "power_spectra": PLACEHOLDER_POWERS}
+    write_run(args.output, data, attrs=attrs)
     gain = np.asarray(data.metadata["hot_load_gain"])
     print(
         f"imported {args.directory}: {', '.join(data.names)}, receiver {layout.receiver!r}, "
         f"{data.n_channels} channels, {data.freq_hz[0] / 1e6:.3f}-{data.freq_hz[-1] / 1e6:.3f} MHz"
     )
     print(f"S11s: {data.metadata['s11'] if not args.vna else f'{args.vna} corrected'}")
+    if receiver_path is not None:
+        print(f"receiver {layout.receiver!r} moved to the loads' plane: {receiver_path.describe()}")
     print(
         f"hot-load loss: {data.metadata['hot_load_loss']} "
         f"(power gain {gain.min():.5f}-{gain.max():.5f})"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InvalidDataError
-from ..hdf5_io import write_run
+from ..hdf5_io import NC346A, write_run
 from ..simulate import REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .files import check_outputs
 
@@ -42,7 +42,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         args.output,
         run.data,
         {run.validation.name: run.validation},
-        attrs={"simulation_seed": args.seed},
+        attrs={"simulation_seed": args.seed, "noise_source_model": NC346A},  # its T_NS: NC346A
         truth=run.truth,
     )
     print(
