@@ -10,6 +10,12 @@ radiometer-limited noise per channel (from the spectra's own scatter, and the fl
 noiseless receiver), the RMS a noise-limited calibration would reach, the Cramer-Rao floor
 of the calibration error, and the RMS difference between ours and the published solution.
 The bounds of ``tests/test_edges3_real.py`` are shown for reference.
+
+``python -m benchmarks.real_data_edges3 --leave-one-out`` prints only the README's
+real-data leave-one-out figures (:func:`leave_one_out_table`): the run imported as an
+analyst would (``reach-cal import edges``, with the pipeline's modelled S11s, and from
+the raw VNA readings of day 2022-319 with and without the receiver's path), solved and
+validated by the command line's defaults.
 """
 
 from __future__ import annotations
@@ -34,6 +40,17 @@ from calibration.rfi import calibrator_flags, flag_spectrum  # noqa: E402
 from calibration.thesis_solver import solve_thesis  # noqa: E402
 
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "edges3-2022-316"
+VNA_NAME = "edges3-2022-319-vna"  #: beside the run's directory
+TEMPERATURES = "amb=306.5,hot=393.22,open=306.5,short=306.5"
+_STANDARDS = ",".join(f"{s}=2022_319_14_{s[0].upper()}.s1p" for s in ("short", "open", "load"))
+#: ``import edges`` options that read the raw readings of day 2022-319 (their README's kit)
+VNA_OPTIONS = (
+    "--device", "2022_319_14_{name}.s1p", "--standards", _STANDARDS,
+    "--standards-for", "lna:" + _STANDARDS.replace("=2022_319_14_", "=2022_319_14_lna_"),
+)
+KIT = """{"name": "edges3", "short": {"offset": {"delay_s": 33e-12, "loss_gohm_per_s": 2.3}},
+ "open": {"offset": {"delay_s": 33e-12, "loss_gohm_per_s": 2.3}},
+ "load": {"resistance_ohm": 49.8, "offset": {"delay_s": 33e-12, "loss_gohm_per_s": 2.3}}}"""
 S_MATCHED_K, NOISE_MARGIN = 0.05, 1.1  # as in tests/test_edges3_real.py
 
 
@@ -220,8 +237,84 @@ def corrections_table(directory: Path) -> None:
           f"spectra (constants here), {own} in the matched loads' own of {flags.size}")
 
 
+def _cli(*args: str) -> tuple[int, str]:
+    """``reach-cal ARGS`` in this process: exit status and what it printed."""
+    import contextlib
+    import io
+
+    from calibration.cli import main as reach_cal
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = reach_cal(list(args))
+    return status, out.getvalue() + err.getvalue()
+
+
+def leave_one_out_table(directory: Path) -> None:
+    """The README's EDGES-3 leave-one-out figures, by the command line's defaults.
+
+    Each row: ``reach-cal import edges`` (hot-load cable UT-141C-SP, band 50-190 MHz) with
+    the S11s named, then ``reach-cal solve`` (its s^2) and ``reach-cal validate
+    --leave-one-out`` (open and short held out: RMS actual error, RMS predicted, their
+    ratio, the 68/95 % coverage; the ambient and hot held out are refused: T_NS).
+    """
+    import json
+    import tempfile
+
+    from calibration.solution_file import read_solution
+
+    variants: list[tuple[str, tuple[str, ...]]] = [("modelled S11s (s11_modelled.txt)", ())]
+    vna = directory.parent / VNA_NAME
+    if vna.is_dir():
+        options = ("--vna", str(vna), *VNA_OPTIONS)
+        variants += [
+            ("raw VNA, receiver path (--receiver-cable edges3)",
+             (*options, "--receiver-cable", "edges3")),
+            ("raw VNA, no receiver path (--receiver-path none)",
+             (*options, "--receiver-path", "none")),
+        ]  # fmt: skip
+    else:
+        print(f"({vna} is absent: the raw VNA rows are left out)")
+    print(f"EDGES-3 leave-one-out by the command line ({directory.name}; reach-cal import "
+          "edges --hot-cable ut141c, solve, validate --leave-one-out), K:")
+    head = f"{'S11s':52s} {'s^2':>7s} {'held out':8s} {'actual':>8s} {'pred':>8s} {'ratio':>6s} "
+    print(head + f"{'in68':>5s} {'in95':>5s}  orders")
+    with tempfile.TemporaryDirectory() as tmp:
+        kit = Path(tmp) / "kit.json"
+        kit.write_text(KIT)
+        for label, extra in variants:
+            run, sol, report = (Path(tmp) / n for n in ("run.h5", "sol.h5", "loo.json"))
+            for path in (run, sol, report):
+                path.unlink(missing_ok=True)
+            kit_args = ("--kit", str(kit)) if extra else ()
+            steps = (
+                ("import", "edges", str(directory), "-o", str(run), "--temperatures",
+                 TEMPERATURES, "--hot-cable", "ut141c", *extra, *kit_args),
+                ("solve", str(run), "-o", str(sol)),
+                ("validate", str(run), "--leave-one-out", "-o", str(report)),
+            )  # fmt: skip
+            for step in steps:
+                status, text = _cli(*step)
+                if status:
+                    raise SystemExit(f"reach-cal {' '.join(step)} failed ({status}):\n{text}")
+            s2 = read_solution(sol).posterior.noise_variance
+            for row in json.loads(report.read_text())["held_out"]:
+                if row["refused"]:
+                    continue
+                print(
+                    f"{label:52s} {s2:7.3f} {row['name']:8s} {row['rms_error_k']:8.3f} "
+                    f"{row['rms_predicted_k']:8.3f} {row['ratio']:6.2f} {row['inside_68']:5.2f} "
+                    f"{row['inside_95']:5.2f}  {','.join(map(str, row['orders']))}"
+                )
+
+
 if __name__ == "__main__":
-    where = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT_DATA
-    main(where)
-    print()
-    corrections_table(where)
+    flags = [a for a in sys.argv[1:] if a.startswith("--")]
+    paths = [a for a in sys.argv[1:] if not a.startswith("--")]
+    where = Path(paths[0]) if paths else DEFAULT_DATA
+    if "--leave-one-out" not in flags:
+        main(where)
+        print()
+        corrections_table(where)
+        print()
+    leave_one_out_table(where)
