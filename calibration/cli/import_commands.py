@@ -2,7 +2,7 @@
 
 ::
 
-    reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,hot=K,open=K,short=K
+    reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,hot=K,open=K,short=K [--cryogenic]
                      [--loads amb,hot,open,short] [--receiver lna]
                      [--spectrum 'sp{name}.txt'] [--s11-export 's11{name}.csv']
                      [--s11-modelled s11_modelled.txt] [--s11 modelled|raw]
@@ -23,10 +23,11 @@ corrected with their standards (:mod:`calibration.vna_import`). ``import vna`` w
 corrected reflections as ``OUT_DIR/{name}.s1p``. A receiver with standards of its own is
 read at another plane than the loads: its path to theirs (:mod:`calibration.receiver_path`)
 must be given, or the planes said to coincide (``--receiver-path none``), else the import is
-refused. The run file's root attribute ``power_spectra = "placeholder"`` marks its powers
-as stand-ins (:mod:`calibration.hdf5_io`). Patterns take ``{name}`` and shell
-wildcards, relative to the directory read; each must match one file. Bad input is
-reported as ``file:line: message`` (or ``file: message``), exit status 2.
+refused. A load below 150 K is refused as a likely Celsius value unless ``--cryogenic``.
+The run file's root attribute ``power_spectra = "placeholder"`` marks its powers as
+stand-ins (:mod:`calibration.hdf5_io`). Patterns take ``{name}`` and shell wildcards,
+relative to the directory read; each must match one file. Bad input is reported as
+``file:line: message`` (or ``file: message``), exit status 2.
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ from ..receiver_path import (
 from ..touchstone import write_touchstone
 from ..vna_import import VnaLayout, check_receiver_plane, correct_exports, read_cal_kit
 from .files import check_outputs, same_file
+from .import_parser import CELSIUS_SLIP_K
 
 __all__ = ["cmd_import_edges", "cmd_import_vna"]
 
@@ -103,6 +105,14 @@ def cmd_import_edges(args: argparse.Namespace) -> int:
     check_outputs({"-o": (args.output, "run")}, inputs, remakes=str(args.directory))
     if not args.band[0] < args.band[1]:
         raise InvalidDataError(f"--band needs LO < HI (MHz), got {args.band[0]:g} {args.band[1]:g}")
+    cold = {k: t for k, t in args.temperatures.items() if t < CELSIUS_SLIP_K}
+    if cold and not args.cryogenic:
+        name, t = next(iter(cold.items()))
+        raise InvalidDataError(
+            f"--temperatures {name}={t:g}: {t:g} K is below {CELSIUS_SLIP_K:g} K, a Celsius "
+            f"value? {t:g} C is {t + 273.15:g} K;\ngive kelvin, or --cryogenic if the load "
+            "really is that cold"
+        )
     given = {
         "loads": args.loads, "receiver": args.receiver, "spectrum": args.spectrum,
         "s11_export": args.s11_export, "s11_modelled": args.s11_modelled,

@@ -27,6 +27,8 @@ RECEIVER_CABLE_FIELDS = ("length_m", "eps_pct", "sigma_pct")
 #: ``--hot-cable``'s fields (:data:`calibration.edges_text.UT141C`), SI units.
 HOT_CABLE_FIELDS = "a, b (radii, m), eps_r, sigma_in, sigma_out (S/m), tan_d, length (m)"
 DEFAULT_BAND = (50.0, 190.0)
+#: A load's temperature below this (K) is refused without --cryogenic: 22.85 is Celsius.
+CELSIUS_SLIP_K = 150.0
 
 EDGES_EPILOG = f"""the receiver's path: with --vna, a receiver with standards of its own (as
 EDGES-3's *_lna_S/O/L.s1p) is read at another plane than the loads; its reading
@@ -162,6 +164,10 @@ def _add_edges_options(edges: argparse.ArgumentParser) -> None:
         required=True,
         metavar="NAME=K,...",
         help="physical temperature of every load, K (no default): amb=306.5,hot=393.22,...",
+    )
+    edges.add_argument(
+        "--cryogenic", action="store_true",
+        help=f"accept loads below {CELSIUS_SLIP_K:g} K (default: refused as a likely Celsius slip)",
     )
     files = edges.add_argument_group("files (patterns: {name} and shell wildcards, one match)")
     files.add_argument(
