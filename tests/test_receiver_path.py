@@ -200,3 +200,13 @@ def test_cli_import_vna_reproduces_the_corrected_files(tmp_path, capsys):
         _, g, _ = read_touchstone(tmp_path / "out" / f"{name}.s1p")
         _, g_csv = et.read_s11_csv(RUN / ("s11.csv" if name == "lna" else f"s11{name}.csv"))
         assert np.max(np.abs(g - g_csv)) < (RECEIVER_TOL if name == "lna" else LOADS_TOL), name
+    # with the receiver's path, its S11 is the pipeline's s11lna.csv
+    moved = [*args[:4], str(tmp_path / "moved"), *args[5:], "--receiver", "lna",
+             "--receiver-cable", "edges3"]  # fmt: skip
+    assert main(moved) == 0, capsys.readouterr().err
+    assert "lna moved to the loads' plane: UT-141C-SP line of 108.2 mm" in capsys.readouterr().out
+    _, g, _ = read_touchstone(tmp_path / "moved" / "lna.s1p")
+    _, g_csv = et.read_s11_csv(RUN / "s11lna.csv")
+    assert np.max(np.abs(g - g_csv)) < PATH_TOL
+    assert main([*moved[:-2]]) == 2
+    assert "--receiver NAME and --receiver-cable" in capsys.readouterr().err

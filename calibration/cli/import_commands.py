@@ -12,6 +12,7 @@
                      [--vna VNA_DIR [VNA options]]
                      [--receiver-cable edges3|length_m=M,... | --receiver-path FILE.s2p|none]
     reach-cal import vna VNA_DIR -o OUT_DIR --devices a,b,... [VNA options]
+                     [--receiver NAME --receiver-cable ...|--receiver-path ...]
 
     VNA options: [--kit KIT.json] [--device '{name}.s1p']
                  [--standards short=P,open=P,load=P] [--standards-for NAME:short=P,...]
@@ -168,10 +169,23 @@ def cmd_import_edges(args: argparse.Namespace) -> int:
 def cmd_import_vna(args: argparse.Namespace) -> int:
     """Correct raw VNA exports with their standards; write each device's S11 as Touchstone."""
     out_dir = Path(args.output)
-    check_outputs({"-o": (args.output, "directory")}, [args.directory, args.kit])
+    path_file = args.receiver_path if (args.receiver_path or "none").lower() != "none" else None
+    check_outputs({"-o": (args.output, "directory")}, [args.directory, args.kit, path_file])
     kit = _kit(args)
     layout = _vna_layout(args)
+    receiver_path = _receiver_path(args)
+    if (receiver_path is not None) != (args.receiver is not None):
+        raise InvalidDataError(
+            "--receiver NAME and --receiver-cable or --receiver-path go together: "
+            "give both or neither"
+        )
+    if args.receiver is not None and args.receiver not in args.devices:
+        raise InvalidDataError(f"--receiver {args.receiver}: not one of --devices")
     corrected = correct_exports(args.directory, args.devices, layout, kit)
+    if receiver_path is not None:
+        f_rec, g_rec = corrected[args.receiver]
+        corrected[args.receiver] = (f_rec, receiver_path.apply(f_rec, g_rec))
+        print(f"{args.receiver} moved to the loads' plane: {receiver_path.describe()}")
     read = [
         find_file(Path(args.directory), pattern, name)
         for name in corrected

@@ -226,7 +226,11 @@ def _add_edges_options(edges: argparse.ArgumentParser) -> None:
         "S11s (default: none)",
     )
     _add_vna_options(edges)
-    path = edges.add_argument_group("the receiver's path (below)")
+    _add_receiver_path_options(edges)
+
+
+def _add_receiver_path_options(parser: argparse.ArgumentParser) -> None:
+    path = parser.add_argument_group("the receiver's path (below)")
     where = path.add_mutually_exclusive_group()
     where.add_argument(
         "--receiver-cable", type=_receiver_cable, metavar="SPEC",
@@ -253,7 +257,7 @@ def add_import_command(sub: Any) -> None:
     vna = add_command(
         kinds, "vna", ".import_commands:cmd_import_vna",
         "Correct raw VNA readings with their standards; write each S11 as Touchstone.",
-        epilog=KIT_FORMAT,
+        epilog=f"the receiver's path: as for import edges (see its --help)\n\n{KIT_FORMAT}",
     )
     vna.add_argument("directory", help="directory of the raw exports")
     vna.add_argument("-o", "--output", type=output_arg, required=True, help="directory to write")
@@ -261,3 +265,8 @@ def add_import_command(sub: Any) -> None:
         "--devices", type=names_arg, required=True, metavar="A,B,...", help="devices to correct"
     )
     _add_vna_options(vna)
+    vna.add_argument(
+        "--receiver", metavar="NAME",
+        help="the device moved to the loads' plane by the receiver's path (default: none)",
+    )
+    _add_receiver_path_options(vna)
