@@ -67,3 +67,48 @@ class PolynomialBasis:
         if self.kind == "power":
             return x[:, None] ** np.arange(n_terms)
         return np.asarray(np.polynomial.legendre.legvander(x, max(n_terms - 1, 0))[:, :n_terms])
+
+
+@dataclass(frozen=True)
+class DelayBasis(PolynomialBasis):
+    """Polynomials followed by delay (Fourier) terms: structure a polynomial cannot hold.
+
+    A noise wave seen through a line of delay ``tau`` rotates with frequency (thesis
+    section 3.1: the correlated noise ``T_cos``, ``T_sin`` are the real and imaginary
+    parts of a wave whose phase runs as ``2 pi nu tau``), and a reflection along a cable
+    adds a ripple of that period to every noise wave. Columns ``0..K-1`` are this
+    band's polynomials (``K = polynomial_terms``), then for each delay ``tau_d``::
+
+        cos(2 pi (nu - nu_c) tau_d),  sin(2 pi (nu - nu_c) tau_d)
+
+    with ``nu_c`` the band's centre. A parameter with ``n <= K`` terms is a polynomial; one
+    with ``K + 2 d`` terms carries the first ``d`` delays as well
+    (:mod:`calibration.delay_terms` chooses them).
+    """
+
+    polynomial_terms: int = 0
+    delays_s: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.polynomial_terms < 1 or not self.delays_s:
+            raise ValueError("a delay basis needs polynomial_terms >= 1 and one delay or more")
+        if not all(np.isfinite(d) and d > 0 for d in self.delays_s):
+            raise ValueError(f"delays must be finite and > 0 s: {self.delays_s}")
+
+    @property
+    def n_terms(self) -> int:
+        """Columns of the whole basis: the polynomials and two per delay."""
+        return self.polynomial_terms + 2 * len(self.delays_s)
+
+    def matrix(self, freq_hz: FloatArray, n_terms: int) -> FloatArray:
+        """The first ``n_terms`` columns at ``freq_hz``: ``(len(freq_hz), n_terms)``."""
+        if n_terms > self.n_terms:
+            raise ValueError(f"{n_terms} terms asked of a delay basis of {self.n_terms}")
+        poly = super().matrix(freq_hz, min(n_terms, self.polynomial_terms))
+        if n_terms <= self.polynomial_terms:
+            return poly
+        f = np.asarray(freq_hz, dtype=float) - 0.5 * (self.f_lo_hz + self.f_hi_hz)
+        phases = 2.0 * np.pi * f[:, None] * np.asarray(self.delays_s)[None, :]
+        waves = np.stack([np.cos(phases), np.sin(phases)], axis=-1).reshape(f.size, -1)
+        return np.concatenate([poly, waves[:, : n_terms - self.polynomial_terms]], axis=1)

@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 from .averaging import MixturePosterior
 from .basis import BasisKind, PolynomialBasis
 from .blas_threads import with_one_blas_thread
-from .conjugate import CoefficientPrior, ScalePrior
+from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior
 from .convergence import (
     MAX_STEPS,
     TOLERANCE,
@@ -69,6 +69,7 @@ from .convergence import (
 )
 from .correlated_reflections import shared_error_excess, widen
 from .data import CalibrationData
+from .delay_terms import Rows, extend, inflated
 from .errors import IllPosedError
 from .errors_in_variables import (
     MU_MAX,
@@ -213,6 +214,47 @@ def _rows(
     return problem.features, problem.response
 
 
+def _beyond_box(
+    data: CalibrationData,
+    posterior: LinearPosterior,
+    basis: PolynomialBasis,
+    problem: LinearisedProblem,
+    scale_prior: ScalePrior | None,
+    search: bool,
+    metadata: dict[str, object],
+    warnings: list[str],
+) -> tuple[LinearPosterior, PolynomialBasis]:
+    """The posterior and basis after :func:`calibration.delay_terms.extend`."""
+    terms = data.terms()
+    temps, q, var_q = data.stacked()
+    gammas = np.stack([s.gamma for s in data.sources.values()])
+    gamma_std = data.reflection_errors()
+
+    def relinearise(theta: FloatArray) -> Rows:
+        extra = reflection_variance(
+            theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
+        )
+        p = linearise(terms, temps, q, var_q, theta, extra)
+        return Rows(p.features, p.weights, p.response)
+
+    b = basis.matrix(data.freq_hz, max(posterior.orders))
+    theta = evaluate_coefficients(posterior.mean, b, posterior.orders)
+    rows = Rows(problem.features, problem.weights, problem.response)
+    ext = extend(
+        rows, theta, posterior.mean.size, data.freq_hz, basis, scale_prior, relinearise,
+        search, at_ceiling=bool(metadata.get("orders_at_ceiling")),
+    )
+    if ext is None:
+        return posterior, basis
+    metadata.update(ext.metadata)
+    warnings.extend(ext.warnings)
+    if ext.model is not None:
+        posterior, basis = ext.model.posterior, ext.model.basis
+    if ext.inflation > 1.0:
+        posterior = inflated(posterior, ext.inflation)
+    return posterior, basis
+
+
 @with_one_blas_thread
 def solve_radiometric(
     data: CalibrationData,
@@ -222,6 +264,7 @@ def solve_radiometric(
     max_steps: int = MAX_STEPS,
     average: bool = True,
     allow_prior_dominated: bool = False,
+    delay_terms: bool = True,
 ) -> Solution:
     """Noise-wave parameters from the radiometer-noise likelihood of Q.
 
@@ -238,6 +281,11 @@ def solve_radiometric(
     in ``metadata["prior_dominated"]``; an undetermined T_NS raises
     :class:`~calibration.identifiability.UndeterminedError` naming it and why, unless
     ``allow_prior_dominated`` (which also lets fixed orders exceed what the data constrain).
+
+    With ``delay_terms`` the fit is tested against the radiometer noise in binned
+    residuals; structure beyond the box is modelled by delay terms where the evidence
+    wants them, and what remains widens the error bars (:mod:`calibration.delay_terms`),
+    with a sentence in ``metadata["warnings"]`` either way.
     """
     if max_steps < 1:
         raise ValueError("max_steps must be >= 1")
@@ -425,6 +473,14 @@ def solve_radiometric(
     if excess is not None:
         posterior = widen(posterior, excess, last.largest)
     best = max(table, key=table.__getitem__)
+    used_basis: PolynomialBasis = basis
+    if delay_terms and last.problem is not None:
+        posterior, used_basis = _beyond_box(
+            data, posterior, basis, last.problem, prior.scale, choice.orders is None,
+            metadata, warnings,
+        )
+        if used_basis is not basis:
+            best = posterior.orders
     metadata["best_orders"] = list(best)
     if isinstance(posterior, MixturePosterior):
         weights = posterior.model_weights()
@@ -434,7 +490,7 @@ def solve_radiometric(
         ]
     solution = Solution(
         method="radiometric",
-        basis=basis,
+        basis=used_basis,
         posterior=posterior,
         measurement_model="radiometer",
         evidence_table=table,

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .averaging import MixturePosterior
+from .basis import DelayBasis, PolynomialBasis
 from .conjugate import LinearPosterior
 from .errors import FileFormatError
 from .hdf5_io import (
@@ -89,6 +90,9 @@ def write_solution_group(f: Any, solution: Solution | ChannelSolution) -> None:
     f.attrs["measurement_model"] = solution.measurement_model
     b = f.create_group("basis")
     b.attrs.update({"kind": basis.kind, "f_lo_hz": basis.f_lo_hz, "f_hi_hz": basis.f_hi_hz})
+    if isinstance(basis, DelayBasis):  # polynomials then delay terms (calibration.delay_terms)
+        b.attrs["polynomial_terms"] = basis.polynomial_terms
+        b.attrs["delays_s"] = np.asarray(basis.delays_s, dtype=float)
     g = f.create_group("posterior")
     _write_posterior(g, post, solution.measurement_model)
     if isinstance(post, MixturePosterior):
@@ -144,6 +148,18 @@ def _read_posterior(g: Any, path: PathLike) -> LinearPosterior:
     return MixturePosterior(**vars(posterior), components=components, weights=weights)
 
 
+def _delays(group: Any, basis: PolynomialBasis, path: PathLike) -> PolynomialBasis:
+    """``basis`` with the delay terms the group records (:class:`DelayBasis`), if any."""
+    if "delays_s" not in group.attrs:
+        return basis
+    try:
+        return DelayBasis(
+            basis.kind, basis.f_lo_hz, basis.f_hi_hz, int(group.attrs["polynomial_terms"]),
+            tuple(float(d) for d in np.atleast_1d(group.attrs["delays_s"])),
+        )
+    except (KeyError, TypeError, ValueError) as err:
+        raise FileFormatError(f"{path}: bad delay terms on '{group.name}': {err}") from err
+
 
 def read_solution(path: PathLike) -> Solution | ChannelSolution:
     """Read a solution written by :func:`write_solution`: whichever kind it holds."""
@@ -159,7 +175,7 @@ def read_solution_group(f: Any, path: PathLike) -> Solution | ChannelSolution:
     if kind != POLYNOMIAL_KIND:
         known = f"{POLYNOMIAL_KIND!r} or {PER_CHANNEL_KIND!r}"
         raise FileFormatError(f"{path}: unknown solution_kind {kind!r} (expected {known})")
-    basis = _basis(_group(f, "basis", path), path)
+    basis = _delays(_group(f, "basis", path), _basis(_group(f, "basis", path), path), path)
     posterior = _read_posterior(_group(f, "posterior", path), path)
     ev = _group(f, "evidence", path)
     ev_orders = _array(ev, "orders", path)
