@@ -129,12 +129,20 @@ def test_engine_reads_the_merged_run(run_dir, sim):
     assert data.sources["hot"].temperature_k[0] == pytest.approx(370.0, abs=1e-12)
 
 
+def test_a_receiver_run_names_its_noise_diode_for_the_engine(run_dir):
+    """REACH's NC346A is named in the run, so the engine's ENR check runs on it (only)."""
+    from calibration.hdf5_io import NC346A, run_noise_source_model
+
+    assert run_noise_source_model(run_dir / "run.h5") == NC346A
+
+
 def test_run_description_and_root_attributes(run_dir):
     with h5py.File(run_dir / "run.h5") as f:
         assert f.attrs["format"] == "reach-receiver-run"
         assert f.attrs["format_version"] == "1.0"
         assert set(json.loads(f.attrs["software"])) == {"reach-receiver", "numpy", "h5py", "python"}
         assert (f.attrs["status"], f.attrs["reason"]) == ("completed", "")
+        assert f.attrs["noise_source_model"] == "NC346A"
         assert f["run/schedule_0"].asstr()[()] == SCHEDULE[1]
         assert f["run/schedule_0"].attrs["path"] == SCHEDULE[0]
         assert f["run/site"].asstr()[()] == SITE

@@ -57,6 +57,7 @@ from scipy.interpolate import CubicSpline
 
 from calibration.hdf5_io import RECEIVER_RUN_FORMAT, RunLayout, read_run_layout
 from calibration.reflection_noise import trace_noise
+from reach_receiver.frontend.layout import NOISE_SOURCE_MODEL
 
 from .parts import (
     FORMAT_VERSION,
@@ -378,6 +379,6 @@ def engine_layout(
     buffer = io.BytesIO()
     with h5py.File(buffer, "w") as f:
         f.attrs.update(format=RECEIVER_RUN_FORMAT, format_version=FORMAT_VERSION)
-        f.attrs["metadata"] = metadata
+        f.attrs.update(metadata=metadata, noise_source_model=NOISE_SOURCE_MODEL)
         write_layout(f, groups, handover)
         return read_run_layout(f, name)

@@ -50,6 +50,7 @@ import numpy as np
 
 from calibration.errors import FileFormatError
 from calibration.hdf5_io import RECEIVER_RUN_FORMAT
+from reach_receiver.frontend.layout import NOISE_SOURCE_MODEL
 
 from .handover import HandOver, select, write_layout
 from .parts import (
@@ -186,6 +187,7 @@ def write_run_file(
             "reason": end[1],
             "name": as_str(desc.attrs["run_name"]),
             "metadata": meta,
+            "noise_source_model": NOISE_SOURCE_MODEL,
         }
         with atomic_h5(target, attrs, f"the merged run file ({target.name})") as f:
             _copy_into(desc, f.create_group("run"))
