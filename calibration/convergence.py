@@ -132,14 +132,20 @@ def damped(
     old: FloatArray, proposal: FloatArray, objective: Convergence,
     chi2: ChiSquare,
 ) -> FloatArray:
-    """``old + alpha (proposal - old)``, halving ``alpha`` from 1 while the misfit rises."""
+    """``old + alpha (proposal - old)``, halving ``alpha`` from 1 while the misfit rises.
+
+    A step is also halved while it takes T_NS to zero or below anywhere (no operating
+    point there: Q's model divides by it); if none is found, ``old`` is kept.
+    """
     base = chi2(old)
     step = proposal - old
     alpha = 1.0
     for _ in range(MAX_HALVINGS):
         trial = old + alpha * step
-        if chi2(trial) <= base * (1.0 + 1e-12) + 1e-9:
+        positive = bool(np.all(trial[INDEX["NS"]] > 0))
+        if positive and chi2(trial) <= base * (1.0 + 1e-12) + 1e-9:
             return trial
         alpha *= 0.5
         objective.halvings += 1
-    return old + alpha * step
+    trial = old + alpha * step
+    return trial if np.all(trial[INDEX["NS"]] > 0) else old

@@ -44,6 +44,7 @@ from .basis import DelayBasis, PolynomialBasis
 from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior
 from .errors import IllPosedError
 from .model_fit import OrderChoice, fit
+from .noise_waves import INDEX
 from .normal_equations import build_normal_equations, evaluate_coefficients
 from .polynomial_model import as_orders
 
@@ -241,7 +242,8 @@ def extend(
         tried = []
         for tau in candidate_delays(current_rows, current_theta, freq_hz, delays):
             model = best_model(current_rows, freq_hz, poly, (*delays, tau), scale_prior)
-            if model is not None:
+            # A model taking T_NS through zero has no operating point to relinearise about.
+            if model is not None and np.all(model.curves(freq_hz)[INDEX["NS"]] > 0):
                 tried.append(model)
         if not tried:
             break
@@ -252,6 +254,8 @@ def extend(
             break
         gains.append(model.log_evidence - base_z)
         for _ in range(RELINEARISE):  # about the new curves, then refit there
+            if not np.all(model.curves(freq_hz)[INDEX["NS"]] > 0):
+                break
             current_theta = model.curves(freq_hz)
             current_rows = relinearise(current_theta)
             refit = _fit_model(
@@ -260,6 +264,8 @@ def extend(
             if refit is None:
                 break
             model = refit
+        if not np.all(model.curves(freq_hz)[INDEX["NS"]] > 0):
+            break  # the refit took T_NS through zero: keep what was found before it
         kept, current_theta = model, model.curves(freq_hz)
         assert isinstance(model.basis, DelayBasis)
         delays = model.basis.delays_s

@@ -459,7 +459,7 @@ def solve_radiometric(
             {"asked": list(a), "kept": list(b), "why": why} for a, b, why in cuts
         ]
     metadata["convergence"] = convergence[0].metadata()
-    warnings: list[str] = []
+    warnings: list[str] = result.warnings()  # the fit's own (model_size), then ours
     if (sentence := convergence[0].warning()) is not None:
         warnings.append(sentence)
     if last.uncorrected_share is not None:

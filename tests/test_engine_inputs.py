@@ -30,7 +30,7 @@ def base(tmp_path_factory):
     run, sol = str(d / "run.h5"), str(d / "sol.h5")
     assert main(["simulate", "-o", run, "--channel-width-hz", "2e6", "--calibrators",
                  CALIBRATORS]) == 0
-    assert main(["solve", run, "-o", sol, "--max-orders", "2,2,2,2,2"]) == 0
+    assert main(["solve", run, "-o", sol, "--max-orders", "5,5,5,5,5"]) == 0
     return d
 
 
@@ -104,7 +104,7 @@ def test_the_receivers_run_files_and_parts_are_measurements_too(work, capsys, fm
 
 
 def test_a_solution_replaces_a_solution_and_a_simulation_a_simulation(work, capsys):
-    assert main(["solve", "run.h5", "-o", "sol.h5", "--orders", "2,2,2,2,2"]) == 0
+    assert main(["solve", "run.h5", "-o", "sol.h5", "--orders", "4,3,4,4,3"]) == 0
     shutil.copy(work / "run.h5", work / "sim.h5")
     assert main(["simulate", "-o", "sim.h5", "--channel-width-hz", "4e6", "--calibrators",
                  CALIBRATORS]) == 0
@@ -264,3 +264,12 @@ def test_a_run_is_replaced_only_by_the_command_that_makes_it_again(work, capsys)
     assert check_outputs({"-o": ("run.h5", "run")}, [], remakes="simulation") is None
     with pytest.raises(InvalidDataError, match="holds measurements"):
         check_outputs({"-o": ("run.h5", "run")}, [], remakes="lab")
+
+
+def test_limits_too_small_for_the_data_are_named_not_the_calibrators(work, capsys):
+    """--max-orders is honoured; where it leaves the fit s^2 >> 1 the refusal says so."""
+    err = refused(["solve", "run.h5", "-o", "small.h5", "--max-orders", "2,2,2,2,2"], capsys,
+                  "a model too small for the data; raise --max-orders")
+    assert "s^2 = " in err
+    assert "the calibrators" not in err
+    assert not (work / "small.h5").exists()

@@ -11,6 +11,7 @@ import pytest
 
 from benchmarks.model_choice import FOUR_LOADS, WIDTH, Ensemble, draw_truth, pilot_sd
 from calibration.conjugate import CoefficientPrior
+from calibration.identifiability import UndeterminedError
 from calibration.model_checks import binned_chi_square, fit_warnings
 from calibration.model_fit import OrderChoice
 from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
@@ -27,7 +28,7 @@ def _run(calibrators, seed, integration_s=600.0):
     return simulate_run(cfg, rng=seed)
 
 
-@pytest.mark.parametrize("limit", [(2, 2, 2, 2, 2), (3, 2, 4, 3, 2)])
+@pytest.mark.parametrize("limit", [(3, 3, 3, 3, 3), (4, 3, 3, 3, 3)])
 def test_given_limits_are_honoured(limit):
     """The REACH-like truth wants 4 terms in three parameters: a given box is not raised."""
     data = _run(REACH_CALIBRATORS, seed=3).data
@@ -37,6 +38,16 @@ def test_given_limits_are_honoured(limit):
     assert all(n <= m for n, m in zip(solution.posterior.orders, limit, strict=True))
     assert solution.metadata["orders_at_ceiling"]  # the data wanted more: said so
     assert any("order limit" in w for w in solution.metadata["warnings"])
+
+
+@pytest.mark.parametrize("limit", [(2, 2, 2, 2, 2), (1, 1, 1, 1, 1)])
+def test_limits_far_too_small_are_refused_naming_the_model_not_the_calibrators(limit):
+    """A box whose misfit (s^2 in the hundreds) leaves T_NS undetermined says why."""
+    data = _run(REACH_CALIBRATORS, seed=3).data
+    with pytest.raises(UndeterminedError, match="a model too small for the data") as err:
+        solve_radiometric(data, OrderChoice(max_orders=limit))
+    assert err.value.parameter == "NS"
+    assert "raise --max-orders" in str(err.value)
 
 
 def test_the_model_used_is_recorded():
@@ -52,9 +63,9 @@ def test_the_model_used_is_recorded():
 
 
 def test_fixed_orders_that_miss_the_structure_are_warned_with_the_figure():
-    """Constant parameters for a receiver with linear-to-cubic structure: s^2 >> 1."""
+    """Quadratics for a receiver with cubic structure: s^2 >> 1, said with the figure."""
     data = _run(REACH_CALIBRATORS, seed=4).data
-    solution = solve_radiometric(data, OrderChoice.fixed((1, 1, 1, 1, 1)))
+    solution = solve_radiometric(data, OrderChoice.fixed((3, 3, 3, 3, 3)))
     s2 = solution.posterior.noise_variance
     assert s2 > 2
     sentences = [w for w in solution.metadata["warnings"] if "s^2" in w]

@@ -423,7 +423,7 @@ def make_base(workdir: Path, per_channel: bool) -> Path:
     base.mkdir(parents=True)
     steps = [
         ("simulate", "-o", "run.h5", "--channel-width-hz", "2e6", "--calibrators", CALIBRATORS),
-        ("solve", "run.h5", "-o", "sol.h5", "--max-orders", "2,2,2,2,2"),
+        ("solve", "run.h5", "-o", "sol.h5", "--max-orders", "5,5,5,5,5"),
     ]
     if per_channel:
         steps.append(("solve", "run.h5", "-o", "chan.h5", "--method", "least-squares"))
