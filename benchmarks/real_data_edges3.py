@@ -261,6 +261,7 @@ def leave_one_out_table(directory: Path) -> None:
     import json
     import tempfile
 
+    from calibration.solution import Solution
     from calibration.solution_file import read_solution
 
     variants: list[tuple[str, tuple[str, ...]]] = [("modelled S11s (s11_modelled.txt)", ())]
@@ -297,7 +298,9 @@ def leave_one_out_table(directory: Path) -> None:
                 status, text = _cli(*step)
                 if status:
                     raise SystemExit(f"reach-cal {' '.join(step)} failed ({status}):\n{text}")
-            s2 = read_solution(sol).posterior.noise_variance
+            solved = read_solution(sol)
+            assert isinstance(solved, Solution), "the default solver is polynomial"
+            s2 = solved.posterior.noise_variance
             for row in json.loads(report.read_text())["held_out"]:
                 if row["refused"]:
                     continue
