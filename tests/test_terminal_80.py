@@ -18,6 +18,9 @@ from pathlib import Path
 
 import pytest
 
+from reach_receiver.daemon.client import DaemonClient
+from reach_receiver.daemon.protocol import Closed, ControlError
+
 ROOT = Path(__file__).resolve().parents[1]
 ENTRY = "import sys; from reach_receiver.cli import {main}; sys.exit({main}(sys.argv[1:]))"
 
@@ -53,6 +56,18 @@ def test_the_dry_run_timeline_fits_80_columns(tmp_path):
     assert max(map(len, lines)) <= 80, max(lines, key=len)
 
 
+def _teensy_up(socket: Path) -> bool:
+    """Whether the daemon's first health reading of the Teensy's link says up (a loaded
+    machine answers on the socket before the simulated devices are brought up)."""
+    try:
+        with DaemonClient(socket) as client:
+            readings = client.request("status")["health"].get("readings", [])
+    except (OSError, ControlError, Closed):
+        return False
+    return any(r.get("key") == "reach_device_up{device=teensy}" and r.get("value") == 1
+               for r in readings)
+
+
 @pytest.fixture
 def reachd(tmp_path: Path) -> Iterator[Path]:
     """A ``reachd --sim``; the site file that finds it."""
@@ -64,10 +79,11 @@ def reachd(tmp_path: Path) -> Iterator[Path]:
     )
     try:
         deadline = time.monotonic() + 60
-        while not ((tmp_path / "run" / "control.sock").exists() and site.exists()):
+        while not ((tmp_path / "run" / "control.sock").exists() and site.exists()
+                   and _teensy_up(tmp_path / "run" / "control.sock")):
             assert process.poll() is None, "reachd --sim exited"
-            assert time.monotonic() < deadline, "reachd did not start"
-            time.sleep(0.1)
+            assert time.monotonic() < deadline, "reachd did not bring its devices up"
+            time.sleep(0.2)
         yield site
     finally:
         process.terminate()
