@@ -1,6 +1,7 @@
 """``reach-run`` end to end against the simulated receiver: the main job, bad input, faults."""
 
 import dataclasses
+import itertools
 import os
 import re
 import signal
@@ -193,7 +194,13 @@ def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, ca
     calibrated = contents.of_kind("calibrated")
     assert [m.name for m in calibrated] == ["ant_0000", "ant_0001", "ant_0002"]
     checks = [m for m in contents.of_kind("check") if m.name == "test_load"]
-    assert len(checks) == 2  # the initial one and the one before cycle 2
+    # The initial one and the one before cycle 2 pass. The simulated VNA's calibration
+    # drifts with time, so on a loaded machine (more simulated time per step) a check can
+    # fail first: then it is a retry after a recalibration that passes.
+    passed = [bool(m.attrs["passed"]) for m in checks]
+    assert passed.count(True) == 2, passed
+    assert passed[-1]
+    assert all(p or after for p, after in itertools.pairwise(passed)), passed
     arrays = contents.read(calibrated[0])
     sky = 2000.0 * (arrays["frequencies"] / 75e6) ** -2.5
     z = (arrays["mean"] - sky) / arrays["std"]
