@@ -211,6 +211,24 @@ class Solution:
         best = self.metadata.get("best_orders")
         return self.orders if best is None else tuple(int(n) for n in best)  # type: ignore[return-value]
 
+    @property
+    def orders_used(self) -> Orders:
+        """The orders of the model that carries the most weight: the model used.
+
+        ``metadata["orders_used"]`` where the solver recorded it, else the heaviest of
+        ``metadata["model_weights"]`` (an averaged solution), else :attr:`best_orders`.
+        The evidence-best single model need not be it: the smooth-function hypothesis
+        (every term to the box's edge) can carry the average with a lower evidence.
+        """
+        used = self.metadata.get("orders_used")
+        if used is None:
+            weights = self.metadata.get("model_weights") or []
+            if self.metadata.get("averaged") and weights:
+                used = max(weights, key=lambda w: float(w["weight"]))["orders"]
+        if used is None:
+            return self.best_orders
+        return tuple(int(n) for n in used)  # type: ignore[return-value]
+
     def models_line(self, limit: int = 4) -> str:
         """The leading models and their weights, for a summary (empty if not averaged)."""
         weights = self.metadata.get("model_weights") or []
@@ -387,6 +405,12 @@ def _is_cuts(value: object) -> bool:
 #: The metadata entries the commands read, and what each must be when present.
 _METADATA_RULES: dict[str, tuple[Callable[[object], bool], str]] = {
     "best_orders": (_is_orders, f"{len(PARAMETERS)} integers 0-{MAX_FILE_ORDER}"),
+    "orders_used": (_is_orders, f"{len(PARAMETERS)} integers 0-{MAX_FILE_ORDER}"),
+    "orders_used_weight": (_is_number, "a number"),
+    "mean_coefficients": (_is_number, "a number"),
+    "warnings": (
+        lambda v: isinstance(v, list) and all(isinstance(n, str) for n in v), "a list of text"
+    ),
     "order_limits": (_is_orders, f"{len(PARAMETERS)} integers 0-{MAX_FILE_ORDER}"),
     "model_weights": (_is_weights, "a list of {orders, weight}"),
     "averaged": (lambda v: isinstance(v, bool), "true or false"),

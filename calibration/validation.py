@@ -132,7 +132,7 @@ def held_out(solution: AnySolution, data: CalibrationData, name: str) -> HeldOut
         ratio=_rms(error) / rms_predicted,
         inside_68=inside[0],
         inside_95=inside[1],
-        orders=tuple(solution.best_orders) if isinstance(solution, Solution) else (),
+        orders=tuple(solution.orders_used) if isinstance(solution, Solution) else (),
     )
 
 

@@ -146,7 +146,7 @@ def test_per_channel_summary_report_validate_and_refusals(runs, tmp_path, capsys
         assert f"  {name:>3}: " in text
         assert " +- " in text
     assert "per channel model" in text
-    ratio = float(text.split("distance to floor (predicted / floor): ")[1].split()[0])
+    ratio = float(text.split("distance to floor: predicted ")[1].split(",")[0].split()[0])
     assert 0.7 < ratio < 1.3  # the Bayesian posterior at its own (per-channel) floor
     assert "actual calibration error RMS" in text
 

@@ -25,6 +25,7 @@ __all__ = [
     "add_solver_options",
     "alpha_arg",
     "band_arg",
+    "joined_band",
     "names_arg",
     "number_arg",
     "orders_arg",
@@ -35,6 +36,11 @@ ORDER_NAMES = ", ".join(PARAMETER_NAMES)
 #: The most terms one parameter's polynomial may have: the order search's own ceiling,
 #: beyond which its Legendre terms only fit noise (and the normal equations grow as n^2).
 MAX_ORDER = ORDER_CEILING
+#: The automatic order box: its start and its step (``calibration.model_fit.OrderChoice``;
+#: held equal by a test, since this module must not import the engine).
+AUTO_BOX_START, AUTO_BOX_STEP = 8, 4
+#: ``calibration.temperature_sanity.CELSIUS_SLIP_K`` (held equal by a test).
+CELSIUS_SLIP_K = 150.0
 Orders = tuple[int, int, int, int, int]
 N = TypeVar("N", int, float)
 
@@ -122,7 +128,11 @@ def add_command(
 
 
 def band_arg(text: str) -> tuple[float, float]:
-    """Parse ``LO,HI`` in MHz with ``0 < LO < HI`` (argparse type)."""
+    """Parse ``LO,HI`` in MHz with ``0 < LO < HI`` (argparse type).
+
+    Every command's band is this one word; ``simulate``'s older ``--band LO HI`` is
+    joined into it before parsing (:func:`joined_band`).
+    """
     try:
         lo, hi = (float(v) for v in text.split(","))
     except ValueError:
@@ -130,6 +140,20 @@ def band_arg(text: str) -> tuple[float, float]:
     if not (0 <= lo < hi and math.isfinite(hi)):
         raise argparse.ArgumentTypeError(f"expected finite 0 <= LO < HI (MHz), got {text!r}")
     return lo, hi
+
+
+def joined_band(argv: list[str]) -> list[str]:
+    """``argv`` with an older two-word ``--band LO HI`` joined into ``--band LO,HI``."""
+    out = list(argv)
+    for i, word in enumerate(out[:-2]):
+        if word == "--band" and "," not in out[i + 1]:
+            try:
+                float(out[i + 1]), float(out[i + 2])
+            except ValueError:
+                continue
+            out[i + 1 : i + 3] = [f"{out[i + 1]},{out[i + 2]}"]
+            break
+    return out
 
 
 def alpha_arg(text: str) -> float:
@@ -146,31 +170,36 @@ def alpha_arg(text: str) -> float:
 def add_correction_options(parser: argparse.ArgumentParser) -> None:
     """Register the preparation and consistency options (module doc) on ``parser``."""
     group = parser.add_argument_group("data preparation and calibrator consistency")
-    group.add_argument("--band", type=band_arg, metavar="LO,HI", help="solve in LO-HI MHz")
+    group.add_argument(
+        "--band", type=band_arg, metavar="LO,HI",
+        help="solve in LO-HI MHz (default: every channel of the run)",
+    )
     group.add_argument(
         "--mask-band",
         type=band_arg,
         action="append",
         default=[],
         metavar="LO,HI",
-        help="drop the channels in LO-HI MHz (repeatable)",
+        help="drop the channels in LO-HI MHz (repeatable; default: none)",
     )
     group.add_argument(
         "--rfi",
         action="store_true",
-        help="drop channels with spikes in a calibrator's load or noise-source spectrum",
+        help="drop channels with spikes in a calibrator's load or noise-source spectrum "
+        "(default: off)",
     )
     group.add_argument(
         "--smooth-s11",
         type=number_arg(float, 0.0, 1.0, open_low=True),
         metavar="P",
-        help="smooth every reflection with a spline of factor P in (0, 1] (1: none)",
+        help="smooth every reflection with a spline of factor P in (0, 1] (default: no "
+        "smoothing, as 1)",
     )
     consistency = group.add_mutually_exclusive_group()
     consistency.add_argument(
         "--check-consistency",
         action="store_true",
-        help="test each calibrator held out against the others and report",
+        help="test each calibrator held out against the others and report (default: off)",
     )
     consistency.add_argument(
         "--exclude-inconsistent",
@@ -201,11 +230,27 @@ def add_solver_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--basis",
         choices=("legendre", "power"),
-        help="polynomial basis of the polynomial solvers (default legendre)",
+        help="polynomial basis of the polynomial solvers (default: legendre)",
     )
     orders = parser.add_mutually_exclusive_group()
-    orders.add_argument("--orders", type=orders_arg, help=f"fixed orders ({ORDER_NAMES})")
     orders.add_argument(
-        "--max-orders", type=orders_arg, help="upper limits of the evidence search (default 8 each)"
+        "--orders", type=orders_arg, metavar="N,N,N,N,N",
+        help=f"fixed numbers of polynomial terms ({ORDER_NAMES}), each 0-{MAX_ORDER} "
+        "(default: chosen by the evidence search)",
     )
-    parser.add_argument("--calibrators", type=names_arg, help="use only these calibrators")
+    orders.add_argument(
+        "--max-orders", type=orders_arg, metavar="N,N,N,N,N",
+        help=f"hard upper limits of the evidence search ({ORDER_NAMES}), each 1-{MAX_ORDER}; "
+        f"the search never goes beyond them, a value above {MAX_ORDER} is refused "
+        f"(default: none; the box starts at {AUTO_BOX_START} terms each and a parameter "
+        f"whose best model reaches its edge is raised by {AUTO_BOX_STEP}, up to {MAX_ORDER})",
+    )
+    parser.add_argument(
+        "--calibrators", type=names_arg, metavar="A,B,...",
+        help="use only these calibrators of the run (default: all of them)",
+    )
+    parser.add_argument(
+        "--cryogenic", action="store_true",
+        help=f"accept calibrators below {CELSIUS_SLIP_K:g} K (default: refused as a likely "
+        "Celsius slip: 22.85 C is 296 K)",
+    )

@@ -3,18 +3,18 @@
 ::
 
     reach-cal simulate -o RUN.h5 [--seed N] [--integration-s S] [--channel-width-hz B]
-                       [--band LO HI] [--calibrators a,b,...] [--vna-sigma X]
+                       [--band LO,HI] [--calibrators a,b,...] [--vna-sigma X]
     reach-cal solve RUN.h5 -o SOLUTION.h5 [--method radiometric|thesis|least-squares|bayesian]
                     [--orders n_unc,n_cos,n_sin,n_NS,n_L | --max-orders ...] [--calibrators ...]
                     [--band LO,HI] [--mask-band LO,HI] [--rfi] [--smooth-s11 P]
                     [--check-consistency | --exclude-inconsistent [N]]  (cli.corrections)
     reach-cal apply SOLUTION.h5 RUN.h5 [--source ant] [-o OUT.h5] [--csv OUT.csv]
                     [--vna-accuracy DRAWS [--vna-correlation-mhz C] [--seed N]]
-    reach-cal summary SOLUTION.h5 [--run RUN.h5 --source ant]
+    reach-cal summary SOLUTION.h5 [--run RUN.h5 [--source NAME]]
     reach-cal import edges DIR -o RUN.h5 --temperatures amb=K,...  (cli.import_commands)
     reach-cal import vna DIR -o OUT_DIR --devices a,b,...
     reach-cal validate RUN.h5 --leave-one-out [...]
-    reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf]
+    reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
 
 Files are those of :mod:`calibration.hdf5_io`. No command writes over one of its inputs or
 a file holding measurements (:mod:`calibration.cli.files`); every numeric option is
@@ -38,12 +38,14 @@ import sys
 from collections.abc import Sequence
 
 from ..constants import DEFAULT_CORRELATION_HZ, ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
-from ..errors import CalibrationError
+from ..errors import CalibrationError, IllPosedError
 from .args import (
     add_command,
     add_correction_options,
     add_solver_options,
+    band_arg,
     count_arg,
+    joined_band,
     names_arg,
     number_arg,
     output_arg,
@@ -67,7 +69,8 @@ DESCRIPTIONS = {
 Columns (K): RMS of the held-out calibrator's calibrated minus known temperature; the
 RMS predicted error, calibration part alone and in full (with the source's radiometer
 noise); actual / full predicted; fractions of channels inside the 68% and 95%
-predictive intervals; the orders chosen. A refused solve prints its reason.""",
+predictive intervals; the orders of the model each solve used (an average's heaviest).
+A refused solve prints its reason; errors far from their prediction are warned about.""",
     "report": """Write a solution's figures (PNG, optionally one PDF) and summary (Markdown, HTML).
 
 With --run (or a receiver's run file as SOLUTION.h5) the report adds each source's
@@ -111,7 +114,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "-o", "--output", type=output_arg, required=True, help="run file to write (HDF5)"
     )
-    sim.add_argument("--seed", type=count_arg, default=0, help="noise seed (default 0)")
+    sim.add_argument(
+        "--seed", type=count_arg, default=0, help="noise seed, an integer >= 0 (default 0)"
+    )
     sim.add_argument(
         "--integration-s",
         type=positive_float,
@@ -122,27 +127,27 @@ def build_parser() -> argparse.ArgumentParser:
         "--channel-width-hz",
         type=positive_float,
         default=ITPM_CHANNEL_WIDTH_HZ,
-        help="channel width, Hz (default the iTPM's 12207 Hz)",
+        help="channel width, Hz (default the iTPM's 12207.03 Hz: 32768 channels over 400 MHz)",
     )
     sim.add_argument(
         "--band",
-        type=positive_float,
-        nargs=2,
+        type=band_arg,
         default=(50.0, 130.0),
-        metavar=("LO", "HI"),
-        help="band in MHz (default 50 130)",
+        metavar="LO,HI",
+        help="band in MHz, as solve takes it (default 50,130; the older LO HI still works)",
     )
     sim.add_argument(
         "--calibrators",
         type=names_arg,
         default=REACH_CALIBRATORS,
-        help="comma-separated calibrators (default all twelve)",
+        help=f"comma-separated calibrators (default REACH's twelve: {','.join(REACH_CALIBRATORS)})",
     )
     sim.add_argument(
         "--vna-sigma",
         type=number_arg(float, 0.0, 1.0),
         default=0.0,
-        help="noise on measured reflection coefficients (default 0)",
+        help="sd of the noise on each measured reflection coefficient, linear units 0-1 "
+        "(default 0: exact reflections)",
     )
 
     solve = command("solve")
@@ -156,11 +161,17 @@ def build_parser() -> argparse.ArgumentParser:
     apply = command("apply")
     apply.add_argument("solution", help="solution file (HDF5)")
     apply.add_argument("run", help="run file holding the source (HDF5)")
-    apply.add_argument("--source", default="ant", help="source to calibrate (default ant)")
     apply.add_argument(
-        "-o", "--output", type=output_arg, help="calibrated spectrum to write (HDF5)"
+        "--source", default="ant",
+        help="source of the run to calibrate, a non-calibrator or a calibrator (default ant)",
     )
-    apply.add_argument("--csv", type=output_arg, help="calibrated spectrum to write (CSV)")
+    apply.add_argument(
+        "-o", "--output", type=output_arg,
+        help="calibrated spectrum to write (HDF5; default: none)",
+    )
+    apply.add_argument(
+        "--csv", type=output_arg, help="calibrated spectrum to write (CSV; default: none)"
+    )
     apply.add_argument(
         "--vna-accuracy", type=_draws_arg, default=0, metavar="DRAWS",
         help="add the VNA's data-sheet accuracy (thesis table 2.3) as a systematic error, "
@@ -171,15 +182,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="correlation length of that error over frequency (default %(default)g MHz)",
     )
     apply.add_argument(
-        "--seed", type=count_arg, default=0, help="seed of the Monte-Carlo draws"
+        "--seed", type=count_arg, default=0, help="seed of the Monte-Carlo draws (default 0)"
     )
 
     summary = command("summary")
     summary.add_argument("solution", help="solution file (HDF5)")
-    summary.add_argument("--run", help="run file: report the noise floor of --source")
-    summary.add_argument("--source", default="ant", help="source of --run (default ant)")
     summary.add_argument(
-        "--top", type=positive_int, default=5, help="evidence-table rows to show (>= 1)"
+        "--run",
+        help="run file (HDF5): also report the noise floor and error of --source (default: none)",
+    )
+    summary.add_argument(
+        "--source",
+        help="source of --run (default: the run's non-calibrator source, e.g. ant; a run "
+        "without one, such as an import, gets each calibrator's in-sample residual)",
+    )
+    summary.add_argument(
+        "--top", type=positive_int, default=5, help="evidence-table rows to show (>= 1, default 5)"
     )
     add_import_command(sub)
 
@@ -188,22 +206,71 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument(
         "--leave-one-out",
         action="store_true",
-        help="solve without each calibrator in turn and calibrate it",
+        help="solve without each calibrator in turn and calibrate it (required)",
     )
     add_solver_options(validate)
-    validate.add_argument("-o", "--output", type=output_arg, help="report to write (.json or .csv)")
+    validate.add_argument(
+        "-o", "--output", type=output_arg, help="report to write, .json or .csv (default: none)"
+    )
 
     report = command("report")
     report.add_argument("solution", help="solution file, or a receiver run file (HDF5)")
-    report.add_argument("--run", help="run file the solution calibrates (HDF5)")
+    report.add_argument(
+        "--run",
+        help="run file the solution calibrates (HDF5; default: none, or SOLUTION.h5 itself if "
+        "it is a receiver's run file); adds the sources, leave-one-out (one solve per "
+        "calibrator) and the run's figures",
+    )
     report.add_argument("-o", "--output", required=True, help="directory to write (created)")
-    report.add_argument("--pdf", action="store_true", help="also write all figures to report.pdf")
+    report.add_argument(
+        "--pdf", action="store_true", help="also write all figures to report.pdf (default: off)"
+    )
+    report.add_argument(
+        "--no-leave-one-out", action="store_true",
+        help="with --run, leave out the leave-one-out residuals (default: computed, one solve "
+        "per calibrator with the solution's method and orders)",
+    )
     return parser
+
+
+def what_to_do(err: BaseException) -> str:
+    """The command-line way out of a refusal whose message names none (empty if it does).
+
+    The engine's messages say what is wrong and, for its Python callers, what to change;
+    a message that already names an option (``--...``) is left alone. An undetermined
+    parameter (``identifiability.UndeterminedError``, read by its ``parameter``
+    attribute: this module imports no engine) and an unconstrained model get the options
+    that change the calibrators or the model.
+    """
+    message = str(err)
+    if "--" in message or not isinstance(err, IllPosedError):
+        return ""
+    parameter = getattr(err, "parameter", None)
+    if parameter == "NS":
+        return (
+            "what to do: solve with calibrators at different temperatures seen through low "
+            "reflection (--calibrators: keep the hot and an ambient load), or fewer terms "
+            "(--max-orders, --orders)"
+        )
+    if parameter is not None:
+        return (
+            f"what to do: add reflective calibrators (open, short) to determine T_{parameter} "
+            "(--calibrators), or fix fewer terms (--orders)"
+        )
+    if "at least 5 calibrators" in message:
+        return "what to do: --method radiometric (polynomials) solves fewer calibrators"
+    return (
+        "what to do: lower the orders (--max-orders or --orders n_unc,n_cos,n_sin,n_NS,n_L), "
+        "or use more calibrators (--calibrators; default all)"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``reach-cal``; return the exit status (0 success, 2 error)."""
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["simulate"]:
+        argv = joined_band(argv)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) and usage errors (2)
@@ -214,6 +281,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(command(args))
     except (CalibrationError, OSError) as err:
         print(f"{PROG}: error: {err}", file=sys.stderr)
+        hint = what_to_do(err)
+        if hint:
+            print(f"{PROG}: {hint}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

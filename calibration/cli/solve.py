@@ -14,11 +14,13 @@ from ..errors import InvalidDataError
 from ..hdf5_io import read_run
 from ..identifiability import caution_lines
 from ..model_fit import OrderChoice
+from ..model_used import model_used_line, warning_lines
 from ..noise_waves import PARAMETERS
 from ..per_frequency import ChannelSolution
 from ..solution import Solution, grid_metadata
 from ..solution_file import write_solution
 from ..solvers import AnySolution, method_name, solver
+from ..temperature_sanity import check_temperatures
 from .args import ORDER_NAMES
 from .corrections import corrected_solve, noise_source_line
 from .files import check_outputs
@@ -46,6 +48,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     data, _ = read_run(args.run)
     if args.calibrators:
         data = data.subset(args.calibrators)
+    for line in check_temperatures(data, args.cryogenic):
+        print(line)
     solve = solver_from_args(args)
     start = time.perf_counter()
     data, solution, prepared = corrected_solve(data, args, solve)
@@ -64,8 +68,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     )
     if isinstance(solution, Solution):
         post = solution.posterior
-        how = "fixed" if args.orders else f"best of {len(solution.evidence_table)} by evidence"
-        print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))} ({how})")
+        print(f"model used, orders ({ORDER_NAMES}): {model_used_line(solution)}")
         if solution.models_line():
             print(f"averaged over models (orders, weight): {solution.models_line()}")
         for line in caution_lines(solution):
@@ -76,6 +79,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
         for line in channel_lines(solution):
             print(line)
     print(noise_source_line(solution, data.freq_hz))
+    for line in warning_lines(solution.metadata):
+        print(line)
     print(f"wrote {args.output}")
     return 0
 

@@ -6,14 +6,17 @@ import argparse
 
 import numpy as np
 
-from ..hdf5_io import read_truth
+from ..data import CalibrationData, SourceData
+from ..hdf5_io import read_run, read_truth
 from ..identifiability import caution_lines
+from ..model_used import distance_line, model_used_line, warning_lines
 from ..noise_waves import PARAMETERS, design_terms, source_temperature
 from ..per_frequency import ChannelSolution
 from ..polynomial_model import coefficient_slices
+from ..solution import check_grid
 from ..solution_file import read_solution
 from ..solvers import AnySolution, method_name, solution_noise_floor
-from .apply import calibrate_source, mk, rms
+from .apply import _check_band, calibrate_source, mk, rms
 from .args import ORDER_NAMES
 from .corrections import noise_source_line
 from .solve import channel_lines, noise_line
@@ -30,6 +33,8 @@ def cmd_summary(args: argparse.Namespace) -> int:
         for line in channel_lines(solution):
             print(line)
         print(noise_source_line(solution))
+        for line in warning_lines(solution.metadata):
+            print(line)
         if args.run:
             _floor_summary(solution, args.run, args.source)
         return 0
@@ -39,19 +44,14 @@ def cmd_summary(args: argparse.Namespace) -> int:
         f"{basis.f_lo_hz / 1e6:.3f}-{basis.f_hi_hz / 1e6:.3f} MHz"
     )
     print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
-    print(f"orders ({ORDER_NAMES}): {', '.join(map(str, solution.best_orders))}")
+    print(f"model used, orders ({ORDER_NAMES}): {model_used_line(solution)}")
     if solution.models_line():
         print(f"averaged over models (orders, weight): {solution.models_line()}")
         print(f"posterior layout (the models' envelope): {solution.orders}")
     for line in caution_lines(solution):
         print(line)
-    at_ceiling = solution.metadata.get("orders_at_ceiling") or []
-    if at_ceiling:
-        print(
-            f"warning: {', '.join(at_ceiling)} reached the order ceiling "
-            f"{solution.metadata.get('order_limits')}: the data want more terms than were "
-            "searched (unmodelled structure?)"
-        )
+    for line in warning_lines(solution.metadata):
+        print(line)
     print("coefficients (K, posterior mean +- std):")
     std = np.sqrt(np.diag(post.covariance))
     for name, s in zip(PARAMETERS, coefficient_slices(solution.orders), strict=True):
@@ -70,8 +70,27 @@ def cmd_summary(args: argparse.Namespace) -> int:
     return 0
 
 
-def _floor_summary(solution: AnySolution, run: str, name: str) -> None:
-    """Noise floor, predicted and (for simulations) actual calibration error of a source."""
+def default_source(others: dict[str, SourceData]) -> str | None:
+    """The source ``summary --run`` reports without ``--source`` (None when there is none).
+
+    The run's first non-calibrator (``ant`` in a simulated or receiver run).
+    """
+    return next(iter(others), None)
+
+
+def _floor_summary(solution: AnySolution, run: str, name: str | None) -> None:
+    """Noise floor, predicted and (for simulations) actual calibration error of a source.
+
+    ``name`` None: the run's non-calibrator source (:func:`default_source`), or, on a run
+    of calibrators alone (an import), each calibrator's in-sample residual.
+    """
+    data, others = read_run(run)
+    if name is None:
+        name = default_source(others)
+        if name is None:
+            _calibrator_summary(solution, data, run)
+            return
+        print(f"source {name!r}: the run's non-calibrator source (--source picks another)")
     data, source, spectrum = calibrate_source(solution, run, name)
     used = [n for n in solution.calibrators if n in data.sources]
     cal_data = data.subset(used) if len(used) == len(solution.calibrators) and used else data
@@ -81,8 +100,8 @@ def _floor_summary(solution: AnySolution, run: str, name: str) -> None:
     model = "per channel" if isinstance(solution, ChannelSolution) else "polynomial"
     print(f"  noise floor RMS (Cramer-Rao, radiometer noise, {model} model): {mk(floor)}")
     print(f"  predicted calibration std RMS: {mk(predicted)}")
-    print(f"  distance to floor (predicted / floor): {predicted / floor:.3f}")
     truth = read_truth(run)
+    actual = None
     if truth is not None:
         terms = design_terms(source.gamma, data.gamma_rec)
         true_t = source_temperature(truth.theta(data.freq_hz), terms, source.q)
@@ -91,3 +110,35 @@ def _floor_summary(solution: AnySolution, run: str, name: str) -> None:
             f"  actual calibration error RMS (solution vs true parameters, same Q): "
             f"{mk(actual)} ({actual / floor:.3f} x floor)"
         )
+    print(f"  {distance_line(predicted, floor, actual)}")
+    if name in data.sources and name in solution.calibrators:
+        print(f"  note: {name!r} is a calibrator of the solution: its residual is in-sample")
+
+
+def _calibrator_summary(solution: AnySolution, data: CalibrationData, run: str) -> None:
+    """A run without a non-calibrator: each calibrator's floor and in-sample residual."""
+    _check_band(solution, data, run)
+    check_grid(solution.metadata, data.freq_hz, data.channel_width_hz, run)
+    used = [n for n in solution.calibrators if n in data.sources] or list(data.names)
+    cal_data = data.subset(used)
+    print(
+        f"{run} has no non-calibrator source (e.g. an import): its {len(used)} calibrators, "
+        "in-sample (the solution was fitted to them; `reach-cal validate RUN "
+        "--leave-one-out` holds each out)"
+    )
+    print(f"  {'calibrator':<12} {'floor':>12} {'predicted':>12} {'residual':>12} {'res/pred':>9}")
+    for name in used:
+        source = cal_data.sources[name]
+        spectrum = solution.calibrate(
+            data.freq_hz, data.gamma_rec, source, data.channel_width_hz, data.gamma_rec_std,
+        )
+        floor = solution_noise_floor(solution, cal_data, source, own_reflection=False).rms
+        residual = rms(spectrum.mean - np.asarray(source.temperature_k, dtype=float))
+        print(
+            f"  {name:<12} {mk(floor):>12} {mk(rms(spectrum.std_calibration)):>12} "
+            f"{mk(residual):>12} {residual / rms(spectrum.std):>9.3f}"
+        )
+    print(
+        "  floor and predicted: calibration error RMS; residual: calibrated minus known "
+        "temperature RMS; res/pred: residual over the full predicted sd (1 = noise model right)"
+    )

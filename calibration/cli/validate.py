@@ -22,11 +22,14 @@ from pathlib import Path
 from typing import Any
 
 from ..atomic_file import write_atomically
-from ..errors import InvalidDataError
+from ..errors import CalibrationError, InvalidDataError
 from ..hdf5_io import read_run
+from ..model_used import warning_lines
+from ..solution import Solution
+from ..temperature_sanity import check_temperatures
 from ..validation import HeldOut, LeaveOneOutReport, leave_one_out
 from .files import check_outputs
-from .solve import solver_from_args
+from .solve import noise_line, solver_from_args
 
 __all__ = ["cmd_validate"]
 
@@ -48,13 +51,27 @@ def cmd_validate(args: argparse.Namespace) -> int:
     data, _ = read_run(args.run)
     if args.calibrators:
         data = data.subset(args.calibrators)
-    report = leave_one_out(data, solver_from_args(args))
+    for line in check_temperatures(data, args.cryogenic):
+        print(line)
+    solve = solver_from_args(args)
+    report = leave_one_out(data, solve)
     print(
         f"leave-one-out on {args.run} ({args.method}, {len(data.names)} calibrators, "
-        f"{data.n_channels} channels); errors in K, RMS over channels:"
+        f"{data.n_channels} channels); errors in K, RMS over channels; orders: the model "
+        "used by each solve (the average's heaviest):"
     )
     for line in report.lines():
         print(f"  {line}")
+    full = None
+    if args.orders is not None:  # fixed orders: one cheap solve gives their s^2 to judge
+        try:
+            full = solve(data)
+        except CalibrationError as err:
+            print(f"every calibrator, orders {','.join(map(str, args.orders))}: refused: {err}")
+    if isinstance(full, Solution):
+        print(f"every calibrator, orders {','.join(map(str, args.orders))}: {noise_line(full)}")
+    for line in warning_lines({"warnings": report.warnings(full)}):
+        print(line)
     if args.output:
         text = _json(report, args) if suffix == ".json" else _csv(report)
         write_atomically(Path(args.output), text)
