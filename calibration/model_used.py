@@ -70,6 +70,9 @@ def model_used_line(solution: Solution) -> str:
     meta = solution.metadata
     used = solution.orders_used
     n_models = len(solution.evidence_table)
+    delays = tuple(getattr(solution.basis, "delays_s", ()))
+    if delays:
+        return _delay_line(solution, used, delays)
     size = f"{sum(used)} coefficients"
     mean = meta.get("mean_coefficients")
     if mean is not None and abs(float(mean) - sum(used)) >= 0.05:
@@ -90,6 +93,20 @@ def model_used_line(solution: Solution) -> str:
             "carries less weight"
         )
     return text
+
+
+def _delay_line(solution: Solution, used: tuple[int, ...], delays: tuple[float, ...]) -> str:
+    """A model of polynomials and delay terms, fitted after the search (``delay_terms``)."""
+    k = int(getattr(solution.basis, "polynomial_terms", 0))
+    listed = ", ".join(f"{d * 1e9:.1f}" for d in delays)
+    parts = [
+        f"{min(n, k)}" + (f"+{n - k}" if n > k else "") for n in used
+    ]
+    return (
+        f"{','.join(parts)} (polynomial terms + cos/sin terms at delays {listed} ns, "
+        f"fitted after the search of {len(solution.evidence_table)} polynomial models; "
+        f"{sum(used)} coefficients)"
+    )
 
 
 def _sentences(metadata: Mapping[str, Any]) -> list[str]:

@@ -8,18 +8,26 @@ into a directory:
   ``report.pdf``): the noise-wave parameters with their bands, the evidence over orders,
   and with a run the calibrated sources, reflections, Dicke powers, flagged channels and
   thermocouples;
-* ``summary.md`` and ``summary.html``: the orders (the best and the leading averaged
-  models with their weights), the noise scale, each source's residual against its noise,
-  the distance of each non-calibrator (the antenna) to the radiometer noise floor
-  (:mod:`calibration.noise_floor`), the share of its calibration variance that is the
-  choice of model (:attr:`~calibration.solution.CalibratedSpectrum.model_choice_share`)
-  and, for a simulated run, its actual error; the checks
+* ``summary.md`` and ``summary.html``: the model used (the average's heaviest model,
+  its weight and size, :mod:`calibration.model_used`; the evidence-best single model and
+  the leading averaged models with their weights beside it), every warning of the
+  solution (``metadata["warnings"]``) and of its leave-one-out, the noise scale, each
+  source's residual against its noise, the distance of each non-calibrator (the antenna)
+  to the radiometer noise floor (:mod:`calibration.noise_floor`), predicted and, for a
+  simulated run, actual (else said to hold only if the model is right), the share of its
+  calibration variance that is the choice of model
+  (:attr:`~calibration.solution.CalibratedSpectrum.model_choice_share`); the checks
   (prior-dominated parameters, orders at the search's ceiling, the run's own checks,
   alarms and events) and the software versions.
 
 The calibrators' residuals are in-sample (the solution was fitted to them): a ratio of
 residual to predicted noise near 1 says the noise model is right, not that the
-calibration generalises (``reach-cal validate --leave-one-out`` tests that).
+calibration generalises. With ``leave_one_out`` (``reach-cal report --run``'s default)
+each calibrator is also held out of the solve and calibrated by the others
+(:mod:`calibration.report_loo`): a table of actual against predicted beside the
+in-sample residuals, and the figure ``leave_one_out.png``. A run of an import
+(``power_spectra = placeholder``) has no measured Dicke powers: ``dicke.png`` says so and
+draws ``Q`` alone.
 
 A per-channel solution (``least-squares``, ``bayesian``: :mod:`calibration.solvers`) has
 no orders to compare: its report leaves out the evidence figure and says so in the
@@ -43,9 +51,20 @@ from numpy.typing import NDArray
 
 from . import figures
 from .data import CalibrationData, SourceData
-from .hdf5_io import RECEIVER_RUN_FORMAT, PathLike, read_run, read_truth, software_version
+from .hdf5_io import (
+    PLACEHOLDER_POWERS,
+    RECEIVER_RUN_FORMAT,
+    PathLike,
+    read_run,
+    read_truth,
+    run_power_spectra,
+    software_version,
+)
+from .model_used import model_used_line, warning_lines
 from .noise_waves import PARAMETERS, design_terms, source_temperature
 from .per_frequency import ChannelSolution
+from .report_loo import ReportLeaveOneOut, report_leave_one_out
+from .report_parts import NO_TRUTH, loo_figure, loo_section
 from .report_render import Section, render_html, render_markdown
 from .run_records import RunRecords, file_software, read_run_records
 from .simulate import ReceiverTruth
@@ -75,6 +94,8 @@ class ReportInputs:
     others: Mapping[str, SourceData] = field(default_factory=dict)
     truth: ReceiverTruth | None = None
     records: RunRecords = field(default_factory=RunRecords)
+    #: The run's spectra are an import's stand-ins (``power_spectra = placeholder``).
+    placeholder_powers: bool = False
 
 
 def _read_solution(path: PathLike) -> tuple[AnySolution, str, bool]:
@@ -103,6 +124,7 @@ def load_inputs(solution_path: PathLike, run_path: PathLike | None = None) -> Re
         others,
         read_truth(run),
         read_run_records(run),
+        run_power_spectra(run) == PLACEHOLDER_POWERS,
     )
 
 
@@ -185,7 +207,8 @@ def _solution_rows(inputs: ReportInputs) -> list[tuple[str, ...]]:
         ("basis", basis.kind),
         ("band (MHz)", f"{basis.f_lo_hz / 1e6:.3f}-{basis.f_hi_hz / 1e6:.3f}"),
         ("calibrators", f"{len(solution.calibrators)}: {', '.join(solution.calibrators)}"),
-        ("best orders (unc, cos, sin, NS, L)", ", ".join(map(str, solution.best_orders))),
+        ("model used, orders (unc, cos, sin, NS, L)", model_used_line(solution)),
+        ("evidence-best single model", ", ".join(map(str, solution.best_orders))),
         ("averaged models (orders weight)", solution.models_line(limit=6) or "none (single model)"),
         ("posterior layout orders", ", ".join(map(str, solution.orders))),
         ("log evidence (nats)", f"{post.log_evidence:.6f}"),
@@ -253,16 +276,18 @@ def _floor_rows(inputs: ReportInputs, calibrated: Calibrated) -> list[tuple[str,
     for name, source in inputs.others.items():
         floor = solution_noise_floor(solution, cal_data, source, own_reflection=False).rms
         predicted = _rms(calibrated.spectra[name].std_calibration)
-        actual = "not simulated"
+        actual, actual_distance = "not simulated", NO_TRUTH
         if inputs.truth is not None:
             true_t = source_temperature(
                 inputs.truth.theta(data.freq_hz), design_terms(source.gamma, data.gamma_rec),
                 source.q,
             )
-            actual = _mk(_rms(calibrated.spectra[name].mean - true_t))
+            error = _rms(calibrated.spectra[name].mean - true_t)
+            actual, actual_distance = _mk(error), f"{error / floor:.4f}"
         share = calibrated.spectra[name].model_choice_share
         rows.append(
-            (name, _mk(floor), _mk(predicted), f"{share:.3f}", f"{predicted / floor:.4f}", actual)
+            (name, _mk(floor), _mk(predicted), f"{share:.3f}", f"{predicted / floor:.4f}",
+             actual, actual_distance)
         )
     return rows
 
@@ -276,10 +301,22 @@ def _software_rows(inputs: ReportInputs) -> list[tuple[str, ...]]:
     return rows
 
 
-def summary_sections(inputs: ReportInputs, calibrated: Calibrated) -> list[Section]:
+def _warning_rows(
+    inputs: ReportInputs, loo: ReportLeaveOneOut | None
+) -> list[tuple[str, ...]]:
+    sentences = [line.removeprefix("warning: ") for line in warning_lines(inputs.solution.metadata)]
+    if loo is not None:
+        sentences += [s for s in loo.report.warnings() if s not in sentences]
+    return [(s,) for s in sentences] or [("none",)]
+
+
+def summary_sections(
+    inputs: ReportInputs, calibrated: Calibrated, loo: ReportLeaveOneOut | None = None
+) -> list[Section]:
     """The summary's sections, each a table (:mod:`calibration.report_render`)."""
     sections = [
         Section("Solution", ("quantity", "value"), _solution_rows(inputs)),
+        Section("Warnings", ("warning",), _warning_rows(inputs, loo)),
         Section("Checks", ("check", "result"), _check_rows(inputs)),
     ]
     if inputs.data is None:
@@ -300,22 +337,26 @@ def summary_sections(inputs: ReportInputs, calibrated: Calibrated) -> list[Secti
                 "Distance to the radiometer noise floor (RMS over channels)",
                 ("source", "floor (mK)", "predicted calibration sigma (mK)",
                  "choice of model (share of that variance)",
-                 "distance (predicted / floor)", "actual error vs truth (mK)"),
+                 "distance (predicted / floor)", "actual error vs truth (mK)",
+                 "actual distance (actual / floor)"),
                 _floor_rows(inputs, calibrated),
             )
         )
+        sections.append(loo_section(loo, calibrated))
     sections.append(Section("Software", ("component", "version"), _software_rows(inputs)))
     return sections
 
 
 def figure_builders(
-    inputs: ReportInputs, calibrated: Calibrated
+    inputs: ReportInputs, calibrated: Calibrated, loo: ReportLeaveOneOut | None = None
 ) -> dict[str, Callable[[], Figure]]:
     """The report's figures by file stem, each built when called (one at a time in memory)."""
     truth = inputs.truth.parameters if inputs.truth is not None else None
     solution = inputs.solution
     builders: dict[str, Callable[[], Figure]] = {
-        "parameters": lambda: figures.noise_wave_parameters(solution, truth=truth),
+        "parameters": lambda: figures.noise_wave_parameters(
+            solution, truth=truth, data=inputs.data
+        ),
     }
     if not isinstance(solution, ChannelSolution):  # no orders: NO_EVIDENCE_FIGURE
         builders["evidence"] = lambda: figures.evidence_landscape(solution)
@@ -329,11 +370,15 @@ def figure_builders(
                 calibrated.spectra, calibrated.references
             ),
             "reflections": lambda: figures.reflections(data, inputs.others),
-            "dicke": lambda: figures.dicke_powers(data, inputs.others),
+            "dicke": lambda: figures.dicke_powers(
+                data, inputs.others, placeholder=inputs.placeholder_powers
+            ),
             "flags": lambda: figures.flagged_channels(data.freq_hz, flags),
             "temperatures": lambda: figures.temperatures(inputs.records.temperature_log),
         }
     )
+    if loo is not None:
+        builders["leave_one_out"] = lambda: loo_figure(loo, calibrated)
     return builders
 
 
@@ -353,10 +398,19 @@ def write_report(
     out_dir: PathLike,
     run_path: PathLike | None = None,
     pdf: bool = False,
+    leave_one_out: bool = False,
 ) -> Report:
-    """Write the figures and the summary of a solution (and its run) into ``out_dir``."""
+    """Write the figures and the summary of a solution (and its run) into ``out_dir``.
+
+    With a run and ``leave_one_out``, each calibrator is also held out of the solve
+    (:mod:`calibration.report_loo`: one solve per calibrator; ``reach-cal report`` asks
+    for it, the receiver's report after each run does not, to keep its time).
+    """
     inputs = load_inputs(solution_path, run_path)
     calibrated = calibrate_run(inputs)
+    loo = None
+    if leave_one_out and inputs.data is not None:
+        loo = report_leave_one_out(inputs.solution, inputs.data)
     directory = Path(out_dir)
     directory.mkdir(parents=True, exist_ok=True)
     pngs: list[Path] = []
@@ -367,12 +421,12 @@ def write_report(
 
         pages = PdfPages(pdf_path)
     with pages if pages is not None else contextlib.nullcontext():
-        for stem, build in figure_builders(inputs, calibrated).items():
+        for stem, build in figure_builders(inputs, calibrated, loo).items():
             fig = build()
             pngs.append(figures.save_png(fig, directory / f"{stem}.png"))
             if pages is not None:
                 pages.savefig(fig)
-    sections = summary_sections(inputs, calibrated)
+    sections = summary_sections(inputs, calibrated, loo)
     names = [p.name for p in pngs]
     title = f"Calibration report: {Path(inputs.solution_path).name}"
     markdown = directory / "summary.md"

@@ -218,8 +218,12 @@ class Solution:
         ``metadata["orders_used"]`` where the solver recorded it, else the heaviest of
         ``metadata["model_weights"]`` (an averaged solution), else :attr:`best_orders`.
         The evidence-best single model need not be it: the smooth-function hypothesis
-        (every term to the box's edge) can carry the average with a lower evidence.
+        (every term to the box's edge) can carry the average with a lower evidence. With
+        delay terms (:class:`~calibration.basis.DelayBasis`) the posterior's own orders:
+        the one model fitted after the polynomial search.
         """
+        if getattr(self.basis, "delays_s", ()):  # delay terms joined after the search
+            return self.orders
         used = self.metadata.get("orders_used")
         if used is None:
             weights = self.metadata.get("model_weights") or []

@@ -97,7 +97,7 @@ def assert_the_report_is_the_solutions(directory: Path, solution) -> None:
     rows = dict(
         re.findall(r"^\| ([^|]+?) \| ([^|]+?) \|$", (directory / "summary.md").read_text(), re.M)
     )
-    assert rows["best orders (unc, cos, sin, NS, L)"] == ", ".join(map(str, solution.best_orders))
+    assert rows["evidence-best single model"] == ", ".join(map(str, solution.best_orders))
     assert rows["posterior layout orders"] == ", ".join(map(str, solution.orders))
 
 

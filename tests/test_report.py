@@ -23,7 +23,7 @@ CONFIG = SimulationConfig(
 )
 RECEIVER_RUN = "receiver-run.h5"
 FIGURES_WITH_RUN = {"parameters", "evidence", "sources", "reflections", "dicke", "flags",
-                    "temperatures"}
+                    "temperatures", "leave_one_out"}
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +39,9 @@ def files(tmp_path_factory):
 @pytest.fixture(scope="module")
 def report(files):
     """The one full report of these tests: the solution file with the receiver's run file."""
-    return write_report(files / "solution.h5", files / "out", files / RECEIVER_RUN)
+    return write_report(
+        files / "solution.h5", files / "out", files / RECEIVER_RUN, leave_one_out=True
+    )
 
 
 def tables(markdown: str) -> dict[str, list[list[str]]]:
@@ -73,7 +75,9 @@ def test_solution_numbers_equal_the_solution(files, report):
     solution = read_solution(files / "solution.h5")
     rows = dict(section(tables(report.markdown.read_text()), "Solution"))
     post = solution.posterior
-    assert rows["best orders (unc, cos, sin, NS, L)"] == ", ".join(map(str, solution.best_orders))
+    used = ",".join(map(str, solution.orders_used))
+    assert rows["model used, orders (unc, cos, sin, NS, L)"].startswith(f"{used} (weight ")
+    assert rows["evidence-best single model"] == ", ".join(map(str, solution.best_orders))
     assert rows["posterior layout orders"] == ", ".join(map(str, solution.orders))
     assert float(rows["log evidence (nats)"]) == pytest.approx(post.log_evidence, abs=1e-6)
     noise = rows["noise scale s^2 (1 = radiometer equation exact)"]
@@ -108,7 +112,7 @@ def test_source_and_floor_numbers_equal_a_recomputation(files, report):
         assert float(calibration) == pytest.approx(1e3 * rms(spectrum.std_calibration), rel=1e-3)
         assert float(ratio) == pytest.approx(rms(error) / rms(spectrum.std), rel=1e-3)
         assert 0.7 < float(ratio) < 1.3  # honest noise model, in-sample
-    ((name, floor, predicted, share, distance, actual),) = section(parsed, "Distance")
+    ((name, floor, predicted, share, distance, actual, ratio),) = section(parsed, "Distance")
     assert name == "ant"
     antenna = solution.calibrate(data.freq_hz, data.gamma_rec, others["ant"])
     assert float(share) == pytest.approx(antenna.model_choice_share, abs=5e-4)
@@ -116,6 +120,7 @@ def test_source_and_floor_numbers_equal_a_recomputation(files, report):
     assert float(floor) == pytest.approx(1e3 * expected, rel=1e-3)
     assert float(distance) == pytest.approx(float(predicted) / float(floor), rel=2e-3)
     assert float(actual) > 0
+    assert float(ratio) == pytest.approx(float(actual) / float(floor), rel=2e-3)
 
 
 def test_checks_and_software(report):

@@ -2,7 +2,7 @@
 
 ::
 
-    reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf]
+    reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
 
 ``SOLUTION.h5`` is a solution file or a receiver's run file (its latest solution, and the
 run itself unless ``--run`` names another). :mod:`calibration.report` says what is written.
@@ -26,7 +26,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     powers, flagged channels, thermocouples, the run's checks and alarms.
     """
     check_outputs({"-o": (args.output, "directory")}, [args.solution, args.run])
-    report = write_report(args.solution, args.output, args.run, pdf=args.pdf)
+    report = write_report(
+        args.solution, args.output, args.run, pdf=args.pdf,
+        leave_one_out=not args.no_leave_one_out,
+    )
     for path in (*report.figures, report.pdf, report.markdown, report.html):
         if path is not None:
             print(f"wrote {path}")

@@ -7,7 +7,8 @@ Built with matplotlib's object API and rendered with Agg (:mod:`.style`), never 
   temperatures and their radiometer noise;
 * :func:`reflections` (:mod:`.reflections`): the sources' and the receiver's reflection
   coefficients on a Smith chart and in dB;
-* :func:`dicke_powers`, :func:`flagged_channels`, :func:`temperatures` (:mod:`.run`): a run.
+* :func:`dicke_powers`, :func:`flagged_channels`, :func:`temperatures` (:mod:`.run`): a run;
+* :func:`held_out_residuals` (:mod:`.validation`): leave-one-out beside the in-sample fit.
 
 Importing this package imports matplotlib; the rest of the engine does not.
 """
@@ -17,12 +18,14 @@ from .reflections import reflections
 from .run import dicke_powers, flagged_channels, temperatures
 from .sources import calibrated_sources
 from .style import save_png
+from .validation import held_out_residuals
 
 __all__ = [
     "calibrated_sources",
     "dicke_powers",
     "evidence_landscape",
     "flagged_channels",
+    "held_out_residuals",
     "noise_wave_parameters",
     "reflections",
     "save_png",

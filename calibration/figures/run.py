@@ -41,6 +41,10 @@ Flags = BoolArray | Mapping[str, BoolArray | tuple[FloatArray, BoolArray]]
 Q_DEFINITION = (
     r"$Q = (P_\mathrm{source} - P_\mathrm{load})\,/\,(P_\mathrm{NS} - P_\mathrm{load})$"
 )
+#: What a power panel of a run without measured powers says.
+NO_POWERS = (
+    "no measured powers: imported run\n(the run file holds Q only; power_spectra = placeholder)"
+)
 _POSITIONS = (
     ("p_source", r"$P_\mathrm{source}$", "on the source"),
     ("p_load", r"$P_\mathrm{load}$", "on the reference load"),
@@ -56,9 +60,17 @@ def _spread(sources: Mapping[str, SourceData], attr: str) -> float:
 
 @styled
 def dicke_powers(
-    data: CalibrationData, others: Mapping[str, SourceData] | None = None
+    data: CalibrationData,
+    others: Mapping[str, SourceData] | None = None,
+    placeholder: bool = False,
 ) -> Figure:
-    """The three Dicke spectra of every source and their ``Q``, against frequency."""
+    """The three Dicke spectra of every source and their ``Q``, against frequency.
+
+    ``placeholder``: the run's spectra are stand-ins carrying only ``Q`` (an import's,
+    run-file attribute ``power_spectra = "placeholder"``,
+    :func:`calibration.hdf5_io.run_power_spectra`): the power panels say "no measured
+    powers" instead of drawing them, and ``Q`` is drawn as imported.
+    """
     sources = {**data.sources, **dict(others or {})}
     styles = source_styles(sources)
     fig = new_figure(7.0)
@@ -70,21 +82,29 @@ def dicke_powers(
         ax.tick_params(labelbottom=False)
     x = mhz(data.freq_hz)
     for name, src in sources.items():
-        for ax, (attr, _, _) in zip(axes, _POSITIONS, strict=False):
-            ax.plot(*envelope(x, getattr(src, attr), WIDTH_PX // 2), lw=0.8, label=name,
-                    **styles[name])
+        if not placeholder:
+            for ax, (attr, _, _) in zip(axes, _POSITIONS, strict=False):
+                ax.plot(*envelope(x, getattr(src, attr), WIDTH_PX // 2), lw=0.8, label=name,
+                        **styles[name])
         axes[3].plot(*envelope(x, src.q, WIDTH_PX // 2), lw=0.8, label=name, **styles[name])
     for ax, (attr, label, title) in zip(axes, _POSITIONS, strict=False):
+        if placeholder:
+            ax.set_title(f"{label}: switch {title}")
+            ax.text(0.5, 0.5, NO_POWERS, ha="center", va="center", fontsize=11,
+                    transform=ax.transAxes, color="0.3")
+            ax.set_yticks([])
+            continue
         ax.set_ylabel(f"{label} (arbitrary power)")
         ax.set_title(f"{label}: switch {title}")
         if attr != "p_source":  # the same for every source but for the noise
             ax.set_title(f"{label}: {title} (sources differ by {_spread(sources, attr):.2%})")
     axes[3].set_ylabel("Q (eq. 3.9)")
-    axes[3].set_title(Q_DEFINITION)
+    axes[3].set_title(Q_DEFINITION + (" as imported" if placeholder else ""))
     for ax in bottom:
         ax.set_xlabel("frequency (MHz)")
-    legend_right(fig, spec, *axes[0].get_legend_handles_labels())
-    suptitle(fig, "Dicke powers of the run")
+    legend_right(fig, spec, *axes[3].get_legend_handles_labels())
+    suptitle(fig, "Dicke powers of the run" + (": none measured (imported run)" if placeholder
+                                                else ""))
     return fig
 
 
