@@ -466,9 +466,16 @@ def check_grid(
             f"{run} has channels {channel_width_hz:g} Hz wide; the solution was solved on "
             f"{width:g} Hz channels: solve this run's grid, or calibrate a run of that grid"
         )
-    steps = (np.asarray(freq_hz, dtype=float) - origin) / width
+    freq = np.asarray(freq_hz, dtype=float)
+    # The grid's step is the channels' spacing, which an import's width (EDGES': the noise
+    # bandwidth of its smoothing, 1.5 channels) need not equal.
+    spacing = width
+    if freq.size > 1:  # the median step, refined over the band (EDGES' are rounded to 1 Hz)
+        k = np.round((freq - freq[0]) / float(np.median(np.diff(freq))))
+        spacing = float(np.dot(k, freq - freq[0]) / np.dot(k, k)) if k[-1] > 0 else width
+    steps = (freq - origin) / spacing
     if np.max(np.abs(steps - np.round(steps)), initial=0.0) > 1e-3:
         raise InvalidDataError(
             f"{run}'s channels are offset from the solution's channel grid "
-            f"({origin:.6g} Hz + k x {width:g} Hz): another spectrometer setting"
+            f"({origin:.6g} Hz + k x {spacing:g} Hz): another spectrometer setting"
         )

@@ -125,9 +125,18 @@ def test_distance_to_floor_gives_the_actual_beside_the_predicted(runs, tmp_path,
     assert 0 < actual < 3
 
 
-def _import_like(run, path, temperature=None):
-    """``run``'s calibrators alone, marked as an import's (optionally one load's T changed)."""
+def _import_like(run, path, temperature=None, edges_like=False):
+    """``run``'s calibrators alone, marked as an import's (optionally one load's T changed).
+
+    ``edges_like``: as EDGES' importer writes them, frequencies rounded to 1 Hz and a
+    channel width (the noise bandwidth of its smoothing) 1.5 times the channel spacing.
+    """
     data, _ = read_run(run)
+    if edges_like:
+        width = 1.5 * data.channel_width_hz
+        data = dataclasses.replace(
+            data, freq_hz=np.round(data.freq_hz + 0.37), channel_width_hz=width
+        )
     if temperature is not None:
         name, t_k = temperature
         src = dataclasses.replace(
@@ -138,9 +147,9 @@ def _import_like(run, path, temperature=None):
     return path
 
 
-@pytest.mark.parametrize("seed", [3, 8])
-def test_summary_on_an_import_reports_its_calibrators(runs, tmp_path, capsys, seed):
-    run = _import_like(runs[seed], tmp_path / "import.h5")
+@pytest.mark.parametrize(("seed", "edges_like"), [(3, False), (8, True)])
+def test_summary_on_an_import_reports_its_calibrators(runs, tmp_path, capsys, seed, edges_like):
+    run = _import_like(runs[seed], tmp_path / "import.h5", edges_like=edges_like)
     sol = tmp_path / "sol.h5"
     assert main(["solve", str(run), "-o", str(sol), "--calibrators", FOUR]) == 0
     code, out, err = _run(capsys, ["summary", sol, "--run", run])
@@ -152,6 +161,7 @@ def test_summary_on_an_import_reports_its_calibrators(runs, tmp_path, capsys, se
     assert set(rows) == set(FOUR.split(","))
     for row in rows.values():
         assert 0.3 < float(row[-1]) < 3  # residual / predicted: the noise model holds
+    assert main(["apply", str(sol), str(run), "--source", "cold"]) == 0  # the grid is its own
     code, _, err = _run(capsys, ["summary", sol, "--run", run, "--source", "ant"])
     assert code == 2
     assert "has no source 'ant'" in err
