@@ -39,8 +39,12 @@ def cmd_summary(args: argparse.Namespace) -> int:
             _floor_summary(solution, args.run, args.source)
         return 0
     post, basis = solution.posterior, solution.basis
+    delays = getattr(basis, "delays_s", ())
+    kind = basis.kind + (
+        f" + delay terms at {', '.join(f'{d * 1e9:.1f}' for d in delays)} ns" if delays else ""
+    )
     print(
-        f"solution {args.solution}: {solution.method} solver, {basis.kind} basis on "
+        f"solution {args.solution}: {solution.method} solver, {kind} basis on "
         f"{basis.f_lo_hz / 1e6:.3f}-{basis.f_hi_hz / 1e6:.3f} MHz"
     )
     print(f"calibrators ({len(solution.calibrators)}): {', '.join(solution.calibrators)}")
