@@ -33,7 +33,9 @@ is imported when it runs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -279,6 +281,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         command = getattr(importlib.import_module(module, __package__), name)
         return int(command(args))
+    except BrokenPipeError:  # the reader (`| head`) stopped reading: nothing to report
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # as a shell reports SIGPIPE
     except (CalibrationError, OSError) as err:
         print(f"{PROG}: error: {err}", file=sys.stderr)
         hint = what_to_do(err)
