@@ -163,7 +163,9 @@ def fit_warnings(
     s2 = getattr(posterior, "noise_variance", None)
     orders = meta.get("orders_used") or meta.get("best_orders")
     named = f" (orders {','.join(map(str, orders))})" if orders else ""
-    if s2 is not None and np.isfinite(s2) and not S2_RANGE[0] <= s2 <= S2_RANGE[1]:
+    # The thesis solver's noise variance is sigma^2 in K^2, not a scale: not judged.
+    scale = getattr(solution, "measurement_model", None) != "homoscedastic"
+    if scale and s2 is not None and np.isfinite(s2) and not S2_RANGE[0] <= s2 <= S2_RANGE[1]:
         why = (
             "the model leaves structure the noise does not explain, or the noise is "
             "underestimated" if s2 > 1 else "the model fits part of the noise"

@@ -102,13 +102,15 @@ class FitResult:
     #: Parameters whose limit the data wanted raised but do not measure at the edge.
     held: tuple[str, ...] = ()
 
-    def limits_metadata(self) -> dict[str, object]:
+    def limits_metadata(self, noise_is_scale: bool = True) -> dict[str, object]:
         """The order limits searched, the parameters left at the ceiling, models skipped.
 
         With the model used (:func:`model_size_metadata`), where the box was held
         below what the evidence asked for ``orders_held`` (:func:`fit_extending`), and
         ``warnings`` on the noise scale and the limits
-        (:func:`~calibration.model_checks.fit_warnings`).
+        (:func:`~calibration.model_checks.fit_warnings`). ``noise_is_scale`` False: the
+        posterior's noise variance is the thesis solver's sigma^2 in K^2, not a scale on
+        the radiometer equation, and is not judged against 1.
         """
         out: dict[str, object] = {
             "order_limits": list(self.max_orders),
@@ -120,13 +122,18 @@ class FitResult:
         }
         if self.held:
             out["orders_held"] = list(self.held)
-        out["warnings"] = self.warnings(out)
+        out["warnings"] = self.warnings(out, noise_is_scale)
         return out
 
-    def warnings(self, metadata: dict[str, object] | None = None) -> list[str]:
+    def warnings(
+        self, metadata: dict[str, object] | None = None, noise_is_scale: bool = True
+    ) -> list[str]:
         """Sentences on the noise scale and the limits (:func:`model_checks.fit_warnings`)."""
-        meta = self.limits_metadata() if metadata is None else metadata
-        return fit_warnings(SimpleNamespace(posterior=self.posterior, metadata=meta))
+        meta = self.limits_metadata(noise_is_scale) if metadata is None else metadata
+        model = "radiometric" if noise_is_scale else "homoscedastic"
+        return fit_warnings(
+            SimpleNamespace(posterior=self.posterior, metadata=meta, measurement_model=model)
+        )
 
 
 def fit_extending(

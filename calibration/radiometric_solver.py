@@ -89,6 +89,7 @@ from .identifiability import (
     require_temperature_contrast,
 )
 from .model_fit import OrderChoice, fit, fit_extending
+from .model_size import model_size_metadata
 from .noise_waves import INDEX, DesignTerms, design_terms, model_q
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders, as_orders
@@ -479,8 +480,9 @@ def solve_radiometric(
             data, posterior, basis, last.problem, prior.scale, choice.orders is None,
             metadata, warnings,
         )
-        if used_basis is not basis:
+        if used_basis is not basis:  # a delay model: it is the model used, not the search's
             best = posterior.orders
+            metadata.update(model_size_metadata(posterior))
     metadata["best_orders"] = list(best)
     if isinstance(posterior, MixturePosterior):
         weights = posterior.model_weights()

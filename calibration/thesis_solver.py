@@ -99,7 +99,10 @@ def solve_thesis(
         measurement_model="homoscedastic",
         evidence_table=result.table,
         calibrators=tuple(data.names),
-        metadata={"sigma_k": float(np.sqrt(posterior.noise_variance)), **result.limits_metadata()},
+        metadata={
+            "sigma_k": float(np.sqrt(posterior.noise_variance)),
+            **result.limits_metadata(noise_is_scale=False),
+        },
     )
     dominated = check_determined(solution, data, prior.coefficients, allow_prior_dominated)
     return replace(solution, metadata={**solution.metadata, "prior_dominated": dominated})

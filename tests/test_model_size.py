@@ -130,3 +130,13 @@ def test_four_loads_leave_one_out_and_binned_residuals_match_the_noise(seed):
     ratios = {r.name: r.ratio for r in report.results}
     for name in ("c10open", "c10short"):
         assert 0.5 <= ratios[name] <= 2.0, ratios
+
+
+def test_the_thesis_solvers_sigma_is_not_judged_as_a_noise_scale():
+    """Its noise variance is sigma^2 in K^2 (0.08 here), not a scale on the radiometer
+    equation: no "s^2 far from 1" sentence for it."""
+    from calibration.thesis_solver import solve_thesis
+
+    solution = solve_thesis(_run(REACH_CALIBRATORS, seed=6).data)
+    assert not 0.8 <= solution.posterior.noise_variance <= 1.25
+    assert not [w for w in solution.metadata["warnings"] if "s^2" in w]
