@@ -34,3 +34,7 @@ DEFAULT_CORRELATION_HZ = 5e6
 
 #: False-alarm rate of the calibrator consistency test (:mod:`calibration.consistency`).
 DEFAULT_ALPHA = 0.01
+
+#: A calibrator below this (K) is taken for a Celsius slip unless declared cryogenic
+#: (:mod:`calibration.temperature_sanity`).
+CELSIUS_SLIP_K = 150.0

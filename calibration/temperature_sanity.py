@@ -20,13 +20,10 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .constants import CELSIUS_SLIP_K
 from .errors import InvalidDataError
 
 __all__ = ["CELSIUS_SLIP_K", "celsius_message", "celsius_slips", "check_temperatures"]
-
-#: A calibrator below this (K) is taken for a Celsius slip unless declared cryogenic.
-CELSIUS_SLIP_K = 150.0
-
 
 def celsius_slips(temperatures: Mapping[str, ArrayLike | float]) -> dict[str, float]:
     """The calibrators whose band-median temperature (K) is below :data:`CELSIUS_SLIP_K`."""

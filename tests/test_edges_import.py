@@ -392,7 +392,7 @@ def test_import_help_gives_every_default_and_unit(capsys):
         (["--receiver-cable", "length=3"], "expected edges3 or length_m=M"),
         (["--receiver-cable", "length_m=0"], "--receiver-cable: receiver cable: needs length_m"),
         (["--temperatures", "amb=22.85,hot=120.07,open=22.85,short=22.85"],
-         "amb=22.85: 22.85 K is below 150 K, a Celsius value? 22.85 C is 296 K"),
+         "look like Celsius: amb at 22.85 K (296 K if 22.85 is Celsius)"),
         (["--temperatures", "amb=77,hot=393,open=77,short=77", "--cryogenic"],
          "'spamb.txt' must match one file"),  # accepted: the files are looked for
     ],

@@ -15,7 +15,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from ..constants import DEFAULT_ALPHA, METHODS, ORDER_CEILING, PARAMETER_NAMES
+from ..constants import (
+    CELSIUS_SLIP_K,
+    DEFAULT_ALPHA,
+    METHODS,
+    ORDER_CEILING,
+    PARAMETER_NAMES,
+)
 
 __all__ = [
     "MAX_ORDER",
@@ -39,8 +45,6 @@ MAX_ORDER = ORDER_CEILING
 #: The automatic order box: its start and its step (``calibration.model_fit.OrderChoice``;
 #: held equal by a test, since this module must not import the engine).
 AUTO_BOX_START, AUTO_BOX_STEP = 8, 4
-#: ``calibration.temperature_sanity.CELSIUS_SLIP_K`` (held equal by a test).
-CELSIUS_SLIP_K = 150.0
 Orders = tuple[int, int, int, int, int]
 N = TypeVar("N", int, float)
 

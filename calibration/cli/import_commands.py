@@ -57,10 +57,10 @@ from ..receiver_path import (
     ReceiverPath,
     read_measured_path,
 )
+from ..temperature_sanity import celsius_message, celsius_slips
 from ..touchstone import write_touchstone
 from ..vna_import import VnaLayout, check_receiver_plane, correct_exports, read_cal_kit
 from .files import check_outputs, same_file
-from .import_parser import CELSIUS_SLIP_K
 
 __all__ = ["cmd_import_edges", "cmd_import_vna"]
 
@@ -106,14 +106,9 @@ def cmd_import_edges(args: argparse.Namespace) -> int:
     check_outputs({"-o": (args.output, "run")}, inputs, remakes=str(args.directory))
     if not args.band[0] < args.band[1]:
         raise InvalidDataError(f"--band needs LO < HI (MHz), got {args.band[0]:g} {args.band[1]:g}")
-    cold = {k: t for k, t in args.temperatures.items() if t < CELSIUS_SLIP_K}
-    if cold and not args.cryogenic:
-        name, t = next(iter(cold.items()))
-        raise InvalidDataError(
-            f"--temperatures {name}={t:g}: {t:g} K is below {CELSIUS_SLIP_K:g} K, a Celsius "
-            f"value? {t:g} C is {t + 273.15:g} K;\ngive kelvin, or --cryogenic if the load "
-            "really is that cold"
-        )
+    slips = celsius_slips(args.temperatures)
+    if slips and not args.cryogenic:
+        raise InvalidDataError(f"--temperatures: {celsius_message(slips)}")
     given = {
         "loads": args.loads, "receiver": args.receiver, "spectrum": args.spectrum,
         "s11_export": args.s11_export, "s11_modelled": args.s11_modelled,

@@ -12,6 +12,7 @@ import math
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+from ..constants import CELSIUS_SLIP_K
 from ..kit_format import KIT_FORMAT
 from .args import add_command, band_arg, names_arg, number_arg, output_arg, positive_float
 
@@ -27,8 +28,6 @@ RECEIVER_CABLE_FIELDS = ("length_m", "eps_pct", "sigma_pct")
 #: ``--hot-cable``'s fields (:data:`calibration.edges_text.UT141C`), SI units.
 HOT_CABLE_FIELDS = "a, b (radii, m), eps_r, sigma_in, sigma_out (S/m), tan_d, length (m)"
 DEFAULT_BAND = (50.0, 190.0)
-#: A load's temperature below this (K) is refused without --cryogenic: 22.85 is Celsius.
-CELSIUS_SLIP_K = 150.0
 
 EDGES_EPILOG = f"""the receiver's path: with --vna, a receiver with standards of its own (as
 EDGES-3's *_lna_S/O/L.s1p) is read at another plane than the loads; its reading
