@@ -67,22 +67,51 @@ RELINEARISE = 2
 
 @dataclass(frozen=True)
 class Rows:
-    """Gauss-Newton rows: features ``(M, N, 5)``, weights and response ``(M, N)``."""
+    """Gauss-Newton rows: features ``(M, N, 5)``, weights and response ``(M, N)``.
+
+    ``offset_variance`` ``(M,)``: each calibrator's declared temperature variance (K^2),
+    an offset shared by all its channels (``SourceData.temperature_std_k``), or None.
+    ``shared_k2`` ``(M, N)``: the part of each row's variance from the reflections'
+    errors (K^2), correlated over ``correlation`` neighbouring channels (a VNA sweep
+    point's error splined over them, :mod:`calibration.correlated_reflections`).
+    """
 
     features: FloatArray
     weights: FloatArray
     response: FloatArray
+    offset_variance: FloatArray | None = None
+    shared_k2: FloatArray | None = None
+    correlation: float = 1.0
 
 
 def binned_chi2(rows: Rows, theta: FloatArray, n_coefficients: int) -> tuple[float, float]:
-    """The binned residual chi-square of the module docstring and its dof."""
+    """The binned residual chi-square of the module docstring and its dof.
+
+    Each bin's weighted residual sum ``u_b = sum_i w_i r_i`` has variance
+    ``V_b = sum w + (c - 1) sum w^2 e`` where the rows' reflection share ``e`` of their
+    variance is correlated over ``c`` channels (``V_b = sum w`` for independent rows). A
+    calibrator's declared temperature offset (variance ``v``) adds ``v W W^T`` with
+    ``W_b = sum w``; the inverse is Sherman-Morrison's::
+
+        chi2 = sum u^2/V - v (sum u W/V)^2 / (1 + v sum W^2/V)
+    """
     residual = rows.response - np.einsum("mnk,kn->mn", rows.features, theta)
     n = residual.shape[1]
     starts = np.linspace(0, n, min(N_BINS, n) + 1).astype(int)[:-1]
     num = np.add.reduceat(rows.weights * residual, starts, axis=1)
     den = np.add.reduceat(rows.weights, starts, axis=1)
+    var = den.copy()
+    if rows.shared_k2 is not None and rows.correlation > 1.0:
+        var += (rows.correlation - 1.0) * np.add.reduceat(
+            rows.weights**2 * rows.shared_k2, starts, axis=1
+        )
     dof = max(float(num.size - n_coefficients), 1.0)
-    return float(np.sum(num**2 / den)), dof
+    chi2 = float(np.sum(num**2 / var))
+    if rows.offset_variance is not None:
+        v = np.asarray(rows.offset_variance, dtype=float)
+        shared = np.sum(num * den / var, axis=1)
+        chi2 -= float(np.sum(v * shared**2 / (1.0 + v * np.sum(den**2 / var, axis=1))))
+    return chi2, dof
 
 
 def excess(chi2: float, dof: float) -> bool:

@@ -224,36 +224,50 @@ def _beyond_box(
     search: bool,
     metadata: dict[str, object],
     warnings: list[str],
-) -> tuple[LinearPosterior, PolynomialBasis]:
-    """The posterior and basis after :func:`calibration.delay_terms.extend`."""
+) -> tuple[LinearPosterior, PolynomialBasis, float]:
+    """The posterior and basis after :func:`calibration.delay_terms.extend`, and its inflation.
+
+    The factor the covariance is to be inflated by for the misfit that remains is applied
+    by the caller after the identifiability check, which asks what the calibrators
+    determine, not how well the model fits.
+    """
     terms = data.terms()
     temps, q, var_q = data.stacked()
     gammas = np.stack([s.gamma for s in data.sources.values()])
     gamma_std = data.reflection_errors()
+    declared = data.temperature_variances()
+    offsets = declared if np.any(declared > 0) else None
+    correlation = float(data.reflection_correlation_channels)
+
+    def _shared(extra: FloatArray | float) -> FloatArray | None:
+        arr = np.broadcast_to(np.asarray(extra, dtype=float), q.shape)
+        return arr if np.any(arr > 0) else None
 
     def relinearise(theta: FloatArray) -> Rows:
         extra = reflection_variance(
             theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
         )
         p = linearise(terms, temps, q, var_q, theta, extra)
-        return Rows(p.features, p.weights, p.response)
+        return Rows(p.features, p.weights, p.response, offsets, _shared(extra), correlation)
 
     b = basis.matrix(data.freq_hz, max(posterior.orders))
     theta = evaluate_coefficients(posterior.mean, b, posterior.orders)
-    rows = Rows(problem.features, problem.weights, problem.response)
+    start = reflection_variance(
+        theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
+    )
+    rows = Rows(problem.features, problem.weights, problem.response, offsets, _shared(start),
+                correlation)
     ext = extend(
         rows, theta, posterior.mean.size, data.freq_hz, basis, scale_prior, relinearise,
         search, at_ceiling=bool(metadata.get("orders_at_ceiling")),
     )
     if ext is None:
-        return posterior, basis
+        return posterior, basis, 1.0
     metadata.update(ext.metadata)
     warnings.extend(ext.warnings)
     if ext.model is not None:
         posterior, basis = ext.model.posterior, ext.model.basis
-    if ext.inflation > 1.0:
-        posterior = inflated(posterior, ext.inflation)
-    return posterior, basis
+    return posterior, basis, max(ext.inflation, 1.0)
 
 
 @with_one_blas_thread
@@ -475,8 +489,9 @@ def solve_radiometric(
         posterior = widen(posterior, excess, last.largest)
     best = max(table, key=table.__getitem__)
     used_basis: PolynomialBasis = basis
+    inflation = 1.0
     if delay_terms and last.problem is not None:
-        posterior, used_basis = _beyond_box(
+        posterior, used_basis, inflation = _beyond_box(
             data, posterior, basis, last.problem, prior.scale, choice.orders is None,
             metadata, warnings,
         )
@@ -503,4 +518,6 @@ def solve_radiometric(
         solution, data, coefficient_prior, allow_prior_dominated
     )
     metadata["warnings"] = warnings
+    if inflation > 1.0:
+        solution = replace(solution, posterior=inflated(solution.posterior, inflation))
     return replace(solution, metadata=metadata)

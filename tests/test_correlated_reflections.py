@@ -27,7 +27,8 @@ from calibration.simulate import SimulationConfig
 WIDTH_HZ = 4 * 12207.03125
 
 
-def _ensemble(step, sigma, seconds, seeds, receiver_exact=True, declared=True):
+def _ensemble(step, sigma, seconds, seeds, receiver_exact=True, declared=True,
+              delay_terms=True):
     """RMS over runs of actual / predicted: the solution's error, the calibrated antenna's."""
     config = SimulationConfig(
         channel_width_hz=WIDTH_HZ, integration_s=seconds, vna_sigma=sigma, vna_step_channels=step
@@ -41,7 +42,7 @@ def _ensemble(step, sigma, seconds, seeds, receiver_exact=True, declared=True):
         if not declared:
             data = dataclasses.replace(data, reflection_correlation_channels=1.0)
         choice = OrderChoice.fixed(run.truth.parameters.orders)
-        solution = solve_radiometric(data, choice, average=False)
+        solution = solve_radiometric(data, choice, average=False, delay_terms=delay_terms)
         own = solution.calibrate(data.freq_hz, run.gamma_rec_true, run.validation_noiseless)
         error = own.mean - run.validation_temperature_k
         solution_ratios.append(np.mean(error**2) / np.mean(own.std_calibration**2))
@@ -69,8 +70,10 @@ def test_the_posterior_holds_the_sources_errors_shared_over_channels(step, sigma
 
 
 def test_without_the_sharing_the_solutions_error_bars_are_too_small():
-    """The same errors with the channels' sharing left out: 1.85x (16 truths)."""
-    solution, _ = _ensemble(8, 4e-4, 600.0, range(8), declared=False)
+    """The same errors with the channels' sharing left out: 1.85x (16 truths). The misfit
+    check (delay terms, binned residuals) is off: undeclared, the sharing shows in the bins
+    as structure and widens the error bars part of the way; the test isolates the sharing."""
+    solution, _ = _ensemble(8, 4e-4, 600.0, range(8), declared=False, delay_terms=False)
     assert solution > 1.5
 
 

@@ -62,9 +62,9 @@ def offset_run(seed: int, declared: float):
     return run, replace(run.data, sources=sources)
 
 
-def chi2_of_truth(run, data):
+def chi2_of_truth(run, data, delay_terms=True):
     truth = run.truth.parameters
-    sol = solve_radiometric(data, OrderChoice.fixed(truth.orders))
+    sol = solve_radiometric(data, OrderChoice.fixed(truth.orders), delay_terms=delay_terms)
     d = sol.posterior.mean - truth.coefficients
     return d @ np.linalg.solve(sol.posterior.covariance, d), d.size
 
@@ -78,7 +78,10 @@ def test_declared_uncertainty_makes_the_posterior_hold_the_truth():
 
 
 def test_ignoring_it_makes_the_posterior_overconfident():
-    results = [chi2_of_truth(*offset_run(seed, 0.0)) for seed in range(3)]
+    """Undeclared offsets: the posterior is overconfident. The misfit check (binned
+    residuals) is off: it sees the offsets as structure and widens the error bars for one
+    seed of three; the test isolates the marginalisation."""
+    results = [chi2_of_truth(*offset_run(seed, 0.0), delay_terms=False) for seed in range(3)]
     chi2s, dof = [r[0] for r in results], [r[1] for r in results]
     assert min(chi2s) > stats.chi2.ppf(0.999, dof[0])
 
