@@ -250,6 +250,7 @@ def extend(
     relinearise: Callable[[FloatArray], Rows],
     search: bool = True,
     at_ceiling: bool = False,
+    noise_scale: float = 1.0,
 ) -> Extension | None:
     """Test the fit of ``theta`` and, where it fails, look beyond the box (docstring).
 
@@ -258,6 +259,10 @@ def extend(
     ``search`` (orders the user fixed) no delay is tried: the misfit is only carried.
     ``at_ceiling`` (the search ended at its order ceiling) tries delays even where the
     test passes: the polynomials may be holding a slow ripple at the cost of their terms.
+    ``noise_scale`` is the fitted ``s^2`` of the posterior ``theta`` is the mean of: its
+    covariance already carries that much misfit, so only the binned excess beyond it
+    widens the error bars (else a misfit spread evenly over the channels, which ``s^2``
+    measures, would be counted twice).
     """
     chi2, dof = binned_chi2(rows, theta, n_coefficients)
     if not excess(chi2, dof) and not (search and at_ceiling):
@@ -324,14 +329,16 @@ def extend(
     ext.metadata["binned_chi2_per_dof"] = {
         "polynomials": round(chi2 / dof, 4), "final": round(ext.chi2_after / ext.dof_after, 4),
     }
-    if excess(ext.chi2_after, ext.dof_after):
-        ext.inflation = ext.chi2_after / ext.dof_after
+    s2 = float(kept.posterior.noise_variance) if kept is not None else noise_scale
+    if excess(ext.chi2_after / s2, ext.dof_after):
+        ext.inflation = ext.chi2_after / ext.dof_after / s2
         ext.metadata["misfit_inflation"] = round(ext.inflation, 4)
         ext.warnings.append(
             f"structure beyond the model remains in the binned residuals (chi2/dof "
-            f"{ext.inflation:.2f} against the radiometer noise): the error bars are widened "
-            f"{np.sqrt(ext.inflation):.2f}x to carry it, but its shape in frequency is not "
-            "modelled; check the calibrators' reflections and cables"
+            f"{ext.chi2_after / ext.dof_after:.2f} against the radiometer noise, "
+            f"{ext.inflation:.2f}x what the fitted noise scale s^2 = {s2:.3g} carries): the "
+            f"error bars are widened {np.sqrt(ext.inflation):.2f}x more to carry it, but its "
+            "shape in frequency is not modelled; check the calibrators' reflections and cables"
         )
     return ext
 

@@ -171,15 +171,6 @@ def determination(
     }
 
 
-#: A noise scale above which a T_NS left undetermined is blamed on the model's size: the
-#: misfit inflates every error bar by ``s``, T_NS's with it.
-MISFIT_SCALE = 10.0
-
-
-def _orders(orders: tuple[int, ...]) -> str:
-    return ",".join(map(str, orders))
-
-
 def check_determined(
     solution: Solution,
     data: CalibrationData,
@@ -202,15 +193,6 @@ def check_determined(
     dominated = {p: round(r, 4) for p, r in ratios.items() if r >= PRIOR_DOMINATED}
     if relative[worst] >= NS_RELATIVE_LIMIT:
         if not allow_prior_dominated:
-            scale = solution.posterior.noise_variance
-            if solution.measurement_model != "homoscedastic" and scale > MISFIT_SCALE:
-                # A box too small for the data: the misfit, not the calibrators, widens T_NS.
-                raise UndeterminedError(
-                    f"T_NS is not determined at orders {_orders(solution.orders)}: the fit "
-                    f"leaves s^2 = {scale:.4g} (1 = radiometer noise), a model too small for "
-                    "the data; raise --max-orders (or --orders), or leave them to the search",
-                    "NS",
-                )
             raise UndeterminedError(
                 f"T_NS is not determined by the calibrators {data.names}: its posterior sd "
                 f"is {sd_ns[worst]:.3g} K against a value of {t_ns[worst]:.4g} K at "

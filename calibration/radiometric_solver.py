@@ -260,6 +260,7 @@ def _beyond_box(
     ext = extend(
         rows, theta, posterior.mean.size, data.freq_hz, basis, scale_prior, relinearise,
         search, at_ceiling=bool(metadata.get("orders_at_ceiling")),
+        noise_scale=float(posterior.noise_variance),
     )
     if ext is None:
         return posterior, basis, 1.0
