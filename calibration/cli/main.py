@@ -99,6 +99,17 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _Version(argparse.Action):
+    """``--version`` on standard output, the version read only when it is asked for.
+
+    importlib.metadata's email parser would otherwise cost every command's start.
+    """
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        print(f"{parser.prog} {_version()}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``reach-cal`` argument parser."""
     parser = argparse.ArgumentParser(
@@ -106,7 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulate, solve, apply and summarise REACH noise-wave calibrations.",
         epilog="Exit status: 0 success, 2 error (message on stderr).",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action=_Version, nargs=0,
+                        help="show program's version number and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str) -> argparse.ArgumentParser:

@@ -22,7 +22,6 @@ import logging
 import os
 import sys
 import textwrap
-from importlib import metadata
 from typing import Any, TextIO
 
 STDERR_FORMAT = "%(asctime)s %(name)s: %(message)s"
@@ -42,7 +41,9 @@ PRIORITIES = {
 
 
 def version() -> str:
-    """The installed version of the project."""
+    """The installed version of the project (importlib.metadata: read only when asked)."""
+    from importlib import metadata
+
     try:
         return metadata.version("reach-receiver")
     except metadata.PackageNotFoundError:
@@ -51,7 +52,19 @@ def version() -> str:
 
 def add_version(parser: argparse.ArgumentParser) -> None:
     """``--version``: the program's name and the project's version."""
-    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+    parser.add_argument("--version", action=_Version, nargs=0,
+                        help="show program's version number and exit")
+
+
+class _Version(argparse.Action):
+    """``--version`` on standard output, the version read only when it is asked for.
+
+    Every command's start would otherwise pay for importlib.metadata's email parser.
+    """
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
+        print(f"{parser.prog} {version()}")
+        parser.exit()
 
 
 def is_journal(stream: TextIO) -> bool:
