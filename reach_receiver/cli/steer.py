@@ -13,7 +13,7 @@ import argparse
 import sys
 from typing import Any
 
-from reach_receiver.config.site import find_site, load_daemon_settings
+from reach_receiver.config.site_file import find_site, load_daemon_settings
 from reach_receiver.daemon.client import DaemonClient, daemon_answers, socket_path
 from reach_receiver.daemon.protocol import Closed, ControlError
 from reach_receiver.errors import ReceiverError

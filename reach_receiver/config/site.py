@@ -30,8 +30,6 @@ Where the file is: ``--site``, else ``$REACH_SITE``, else ``/etc/reach/site.yaml
 from __future__ import annotations
 
 import dataclasses
-import os
-import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +39,6 @@ import yaml
 
 from calibration.constants import METHODS
 from reach_receiver.clock import Clock, CompressedClock, SystemClock
-from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.layout import (
     REACH_SOURCES,
     SOURCE_THERMOCOUPLE,
@@ -58,41 +55,27 @@ from .corrections import (
     touchstone_problem,
 )
 from .daemon import DAEMON_KEYS, DaemonSettings, daemon_yaml, read_daemon
-from .fields import REQUIRED, Fields, closest, type_name
+from .fields import REQUIRED, Fields, type_name
 from .monitoring import MONITORING_KEYS, MonitoringSettings, monitoring_yaml, read_monitoring
 from .settings import DEVICE_SCHEMAS, DeviceSettings, keys_of, read_settings
-from .yaml_lines import LineDict, Problem, ProblemsError, load_yaml, with_lines
+from .site_file import (
+    SECTIONS,
+    SectionReader,
+    SiteError,
+    find_site,
+    read_bounded,
+)
+from .yaml_lines import LineDict, Problem, load_yaml, with_lines
 
 #: The calibration band when the site does not set one (thesis 4.1: REACH's 50-130 MHz).
 DEFAULT_BAND_HZ = (50e6, 130e6)
 #: The calibrate step's solver when neither the step nor the site names one.
 DEFAULT_SOLVER = METHODS[0]
-#: The site file of the deployed instrument, when neither ``--site`` nor ``$REACH_SITE``.
-SYSTEM_SITE = Path("/etc/reach/site.yaml")
-SITE_ENVIRONMENT = "REACH_SITE"
-
-SECTIONS = (
-    "site",
-    "devices",
-    "calibration",
-    "references",
-    "sources",
-    "thermocouples",
-    "daemon",
-    "monitoring",
-    "simulation",
-)
 _PLACE_KEYS = ("name", "longitude_deg", "latitude_deg")
 _REFERENCE_KEYS = ("test_load",)
 _SIMULATION_KEYS = ("compression", "start", "monotonic_origin")
 #: Simulated seconds per real second a shared clock may run at (reach-sim's default: 3000).
 MAX_COMPRESSION = 1e6
-#: The largest site file read: a site is a page of YAML.
-MAX_SITE_BYTES = 1024 * 1024
-
-
-class SiteError(ProblemsError):
-    """A site file with mistakes, each ``file:line: key: message``."""
 
 
 @dataclass(frozen=True)
@@ -169,33 +152,6 @@ class SiteConfig:
         return yaml.safe_dump(document, sort_keys=False)
 
 
-class _Reader:
-    """Reads one site document, collecting every problem."""
-
-    def __init__(self, document: LineDict, file: str) -> None:
-        self.document = document
-        self.file = file
-        self.problems: list[Problem] = []
-        for key in document:
-            if key not in SECTIONS:
-                known = ", ".join(SECTIONS)
-                message = f"unknown section '{key}'{closest(key, SECTIONS)} (known: {known})"
-                self.report(document.line_of(key), str(key), message)
-
-    def section(self, name: str, allowed: tuple[str, ...]) -> Fields:
-        """A reader of one top-level section (empty when absent or not a mapping)."""
-        value = self.document.get(name)
-        line = self.document.line_of(name)
-        if value is not None and not isinstance(value, LineDict):
-            self.report(line, name, f"must be a mapping, not {type_name(value)}")
-        if not isinstance(value, LineDict):
-            value = LineDict(line=line)
-        return Fields(value, file=self.file, key=name, allowed=allowed, problems=self.problems)
-
-    def report(self, line: int, key: str, message: str) -> None:
-        self.problems.append(Problem(self.file, line, key, message))
-
-
 def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     """Check and convert a loaded site document; every mistake is reported at once.
 
@@ -208,7 +164,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     if not isinstance(document, LineDict):
         message = f"a site file is a mapping of {', '.join(SECTIONS)}, not {type_name(document)}"
         raise SiteError([Problem(source, 1, "<document>", message)])
-    reader = _Reader(document, source)
+    reader = SectionReader(document, source)
     place = reader.section("site", _PLACE_KEYS)
     longitude = place.number("longitude_deg", 0.0, low=-180.0, high=360.0)
     latitude = place.number("latitude_deg", 0.0, low=-90.0, high=90.0)
@@ -277,7 +233,7 @@ def _clock(simulation: Fields) -> dict[str, float]:
     return clock
 
 
-def _devices(reader: _Reader) -> DeviceSettings | None:
+def _devices(reader: SectionReader) -> DeviceSettings | None:
     devices = reader.section("devices", tuple(DEVICE_SCHEMAS))
     read: dict[str, Any] = {}
     for name, schema in DEVICE_SCHEMAS.items():
@@ -304,7 +260,7 @@ def _devices(reader: _Reader) -> DeviceSettings | None:
     return DeviceSettings(**read)
 
 
-def _band(reader: _Reader) -> tuple[float, float] | None:
+def _band(reader: SectionReader) -> tuple[float, float] | None:
     calibration = reader.section("calibration", CALIBRATION_KEYS)
     if not calibration.has("band_hz"):
         return DEFAULT_BAND_HZ
@@ -322,7 +278,7 @@ def _band(reader: _Reader) -> tuple[float, float] | None:
     return float(low), float(high)
 
 
-def _sources(reader: _Reader) -> dict[str, SourcePosition]:
+def _sources(reader: SectionReader) -> dict[str, SourcePosition]:
     table = dict(REACH_SOURCES)
     given = reader.document.get("sources")
     if given is None:
@@ -350,7 +306,7 @@ def _sources(reader: _Reader) -> dict[str, SourcePosition]:
     return table
 
 
-def _position(reader: _Reader, name: str, where: object, line: int) -> SourcePosition | None:
+def _position(reader: SectionReader, name: str, where: object, line: int) -> SourcePosition | None:
     """``{ms1: 7, ms3: 2}``: an MS1 position and at most one termination switch."""
     key = f"sources.{name}"
     if not isinstance(where, dict) or "ms1" not in where or set(where) - {"ms1", "ms3", "ms4"}:
@@ -370,7 +326,7 @@ def _position(reader: _Reader, name: str, where: object, line: int) -> SourcePos
     return SourcePosition(values["ms1"], termination)
 
 
-def _thermocouples(reader: _Reader) -> dict[str, int]:
+def _thermocouples(reader: SectionReader) -> dict[str, int]:
     ports = dict(SOURCE_THERMOCOUPLE)
     given = reader.document.get("thermocouples")
     if given is None:
@@ -408,7 +364,7 @@ def load_site(path: str | Path) -> SiteConfig:
     """
     path = Path(path)
     try:
-        text = _read_bounded(path)
+        text = read_bounded(path)
     except (OSError, UnicodeDecodeError) as err:
         message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
         raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
@@ -416,66 +372,6 @@ def load_site(path: str | Path) -> SiteConfig:
     if problems:
         raise SiteError(problems)
     return parse_site(document, str(path))
-
-
-def load_daemon_settings(path: str | Path) -> DaemonSettings:
-    """Only the ``daemon`` section of a site file: where a client finds ``reachd``.
-
-    A client of the daemon (``reach-run status``) needs its directories, not the checks
-    of the Touchstone references, which load numpy. Raises :class:`SiteError` as
-    :func:`load_site` does for what it reads.
-    """
-    path = Path(path)
-    try:
-        text = _read_bounded(path)
-    except (OSError, UnicodeDecodeError) as err:
-        message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
-        raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
-    document, problems = load_yaml(text, str(path))
-    document = with_lines(document)
-    if problems or not isinstance(document, LineDict):
-        raise SiteError(problems or [Problem(str(path), 1, "<document>", "not a mapping")])
-    reader = _Reader(document, str(path))
-    daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), str(path), reader.problems)
-    if reader.problems:
-        raise SiteError(sorted(dict.fromkeys(reader.problems), key=lambda p: p.line))
-    return daemon
-
-
-def _read_bounded(path: Path) -> str:
-    """The text of a regular file of at most :data:`MAX_SITE_BYTES` (else ``OSError``).
-
-    A device (``/dev/zero``), a FIFO or a huge file named as the site would fill memory
-    or block forever: they are refused before reading.
-    """
-    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        raise OSError(f"{path} is not a regular file")
-    with os.fdopen(fd, "rb") as handle:
-        data = handle.read(MAX_SITE_BYTES + 1)
-    if len(data) > MAX_SITE_BYTES:
-        raise OSError(f"larger than {MAX_SITE_BYTES} bytes: not a site file")
-    return data.decode("utf-8")
-
-
-def find_site(given: Path | None, environ: Mapping[str, str] = os.environ) -> Path:
-    """The site file to use: ``given``, else ``$REACH_SITE``, else ``/etc/reach/site.yaml``.
-
-    Raises
-    ------
-    ConfigError
-        When the chosen file does not exist, naming where it was looked for.
-    """
-    if given is not None:
-        return Path(given)
-    if environ.get(SITE_ENVIRONMENT):
-        return Path(environ[SITE_ENVIRONMENT])
-    if SYSTEM_SITE.is_file():
-        return SYSTEM_SITE
-    raise ConfigError(
-        f"no site file: give --site <file>, set ${SITE_ENVIRONMENT}, or install {SYSTEM_SITE}"
-    )
 
 
 def replace_devices(site: SiteConfig, **changes: Any) -> SiteConfig:
