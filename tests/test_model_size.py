@@ -11,7 +11,6 @@ import pytest
 
 from benchmarks.model_choice import FOUR_LOADS, WIDTH, Ensemble, draw_truth, pilot_sd
 from calibration.conjugate import CoefficientPrior
-from calibration.identifiability import UndeterminedError
 from calibration.model_checks import binned_chi_square, fit_warnings
 from calibration.model_fit import OrderChoice
 from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
