@@ -63,9 +63,9 @@ from .site_file import (
     SectionReader,
     SiteError,
     find_site,
-    read_bounded,
+    read_document,
 )
-from .yaml_lines import LineDict, Problem, load_yaml, with_lines
+from .yaml_lines import LineDict, Problem, with_lines
 
 #: The calibration band when the site does not set one (thesis 4.1: REACH's 50-130 MHz).
 DEFAULT_BAND_HZ = (50e6, 130e6)
@@ -363,15 +363,7 @@ def load_site(path: str | Path) -> SiteConfig:
         Every mistake, ``file:line: key: message``; also an unreadable file.
     """
     path = Path(path)
-    try:
-        text = read_bounded(path)
-    except (OSError, UnicodeDecodeError) as err:
-        message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
-        raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
-    document, problems = load_yaml(text, str(path))
-    if problems:
-        raise SiteError(problems)
-    return parse_site(document, str(path))
+    return parse_site(read_document(path), str(path))
 
 
 def replace_devices(site: SiteConfig, **changes: Any) -> SiteConfig:

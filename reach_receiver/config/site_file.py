@@ -72,6 +72,19 @@ class SectionReader:
         self.problems.append(Problem(self.file, line, key, message))
 
 
+def read_document(path: Path) -> object:
+    """The YAML document of a site file, read bounded; :class:`SiteError` if it cannot be."""
+    try:
+        text = read_bounded(path)
+    except (OSError, UnicodeDecodeError) as err:
+        message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
+        raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
+    document, problems = load_yaml(text, str(path))
+    if problems:
+        raise SiteError(problems)
+    return document
+
+
 def load_daemon_settings(path: str | Path) -> DaemonSettings:
     """Only the ``daemon`` section of a site file: where a client finds ``reachd``.
 
@@ -80,15 +93,9 @@ def load_daemon_settings(path: str | Path) -> DaemonSettings:
     :func:`load_site` does for what it reads.
     """
     path = Path(path)
-    try:
-        text = read_bounded(path)
-    except (OSError, UnicodeDecodeError) as err:
-        message = f"cannot read the site file: {getattr(err, 'strerror', None) or err}"
-        raise SiteError([Problem(str(path), 1, "<file>", message)]) from err
-    document, problems = load_yaml(text, str(path))
-    document = with_lines(document)
-    if problems or not isinstance(document, LineDict):
-        raise SiteError(problems or [Problem(str(path), 1, "<document>", "not a mapping")])
+    document = with_lines(read_document(path))
+    if not isinstance(document, LineDict):
+        raise SiteError([Problem(str(path), 1, "<document>", "not a mapping")])
     reader = SectionReader(document, str(path))
     daemon = read_daemon(reader.section("daemon", DAEMON_KEYS), str(path), reader.problems)
     if reader.problems:
