@@ -42,14 +42,23 @@ def solver_from_args(args: argparse.Namespace) -> Callable[[CalibrationData], An
     return solver(args.method, choice, args.basis)
 
 
-def cmd_solve(args: argparse.Namespace) -> int:
-    """Solve a run for the noise-wave parameters and write the solution."""
-    check_outputs({"-o": (args.output, "solution")}, [args.run])
+def calibrators_of(args: argparse.Namespace) -> CalibrationData:
+    """The run's calibrators as ``--calibrators`` and ``--cryogenic`` ask (solve, validate).
+
+    Temperatures that look like Celsius are refused, or noted where ``--cryogenic``.
+    """
     data, _ = read_run(args.run)
     if args.calibrators:
         data = data.subset(args.calibrators)
     for line in check_temperatures(data, args.cryogenic):
         print(line)
+    return data
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    """Solve a run for the noise-wave parameters and write the solution."""
+    check_outputs({"-o": (args.output, "solution")}, [args.run])
+    data = calibrators_of(args)
     solve = solver_from_args(args)
     start = time.perf_counter()
     data, solution, prepared = corrected_solve(data, args, solve)

@@ -23,13 +23,11 @@ from typing import Any
 
 from ..atomic_file import write_atomically
 from ..errors import CalibrationError, InvalidDataError
-from ..hdf5_io import read_run
 from ..model_used import warning_lines
 from ..solution import Solution
-from ..temperature_sanity import check_temperatures
 from ..validation import HeldOut, LeaveOneOutReport, leave_one_out
 from .files import check_outputs
-from .solve import noise_line, solver_from_args
+from .solve import calibrators_of, noise_line, solver_from_args
 
 __all__ = ["cmd_validate"]
 
@@ -48,11 +46,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     if suffix not in ("", ".json", ".csv"):
         raise InvalidDataError(f"-o {args.output}: write .json or .csv")
     check_outputs({"-o": (args.output, "text")}, [args.run])
-    data, _ = read_run(args.run)
-    if args.calibrators:
-        data = data.subset(args.calibrators)
-    for line in check_temperatures(data, args.cryogenic):
-        print(line)
+    data = calibrators_of(args)
     solve = solver_from_args(args)
     report = leave_one_out(data, solve)
     print(
