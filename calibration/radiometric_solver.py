@@ -56,8 +56,9 @@ from numpy.typing import NDArray
 
 from .averaging import MixturePosterior
 from .basis import BasisKind, PolynomialBasis
+from .beyond_box import beyond_box
 from .blas_threads import with_one_blas_thread
-from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior
+from .conjugate import CoefficientPrior, ScalePrior
 from .convergence import (
     MAX_STEPS,
     TOLERANCE,
@@ -69,7 +70,7 @@ from .convergence import (
 )
 from .correlated_reflections import shared_error_excess, widen
 from .data import CalibrationData
-from .delay_terms import Rows, extend, inflated
+from .delay_terms import inflated
 from .errors import IllPosedError
 from .errors_in_variables import (
     MU_MAX,
@@ -88,9 +89,10 @@ from .identifiability import (
     require_positive_ns,
     require_temperature_contrast,
 )
+from .linearisation import LinearisedProblem, linearise
 from .model_fit import OrderChoice, fit, fit_extending
 from .model_size import model_size_metadata
-from .noise_waves import INDEX, DesignTerms, design_terms, model_q
+from .noise_waves import INDEX, design_terms
 from .normal_equations import NormalEquations, build_normal_equations, evaluate_coefficients
 from .polynomial_model import Orders, as_orders
 from .reflection_noise import reflection_variance, temperature_variance
@@ -112,43 +114,6 @@ class RadiometricPrior:
 
     coefficients: CoefficientPrior | ShrinkagePrior = field(default_factory=ShrinkagePrior)
     scale: ScalePrior | None = field(default_factory=lambda: ScalePrior(1.0, 2.0))
-
-
-@dataclass(frozen=True)
-class LinearisedProblem:
-    """Rows of the Gauss-Newton regression about a parameter estimate (module docstring)."""
-
-    features: FloatArray
-    weights: FloatArray
-    response: FloatArray
-
-
-def linearise(
-    terms: DesignTerms,
-    temps: FloatArray,
-    q: FloatArray,
-    var_q: FloatArray,
-    theta0: FloatArray,
-    extra_variance_k2: FloatArray | float = 0.0,
-) -> LinearisedProblem:
-    """Gauss-Newton rows about ``theta0`` (``(5, n_channels)`` parameter curves).
-
-    ``extra_variance_k2`` is added to each row's variance in kelvin (the reflection's
-    error, :mod:`calibration.reflection_noise`).
-    """
-    t_ns0 = theta0[INDEX["NS"]]
-    if np.any(t_ns0 <= 0):
-        raise IllPosedError(
-            "cannot linearise about T_NS <= 0 K: the operating point needs a positive "
-            "noise-source temperature at every channel"
-        )
-    q0 = model_q(theta0, terms, temps)
-    gain = terms.x_l * t_ns0
-    return LinearisedProblem(
-        features=terms.matrix(q0),
-        weights=1.0 / (gain**2 * var_q + extra_variance_k2),
-        response=temps - gain * (q - q0),
-    )
 
 
 @dataclass
@@ -213,62 +178,6 @@ def _rows(
     """The Gauss-Newton rows' features and response about ``theta`` at given reflections."""
     problem = linearise(design_terms(gamma, gamma_rec[None, :]), temps, q, var_q, theta)
     return problem.features, problem.response
-
-
-def _beyond_box(
-    data: CalibrationData,
-    posterior: LinearPosterior,
-    basis: PolynomialBasis,
-    problem: LinearisedProblem,
-    scale_prior: ScalePrior | None,
-    search: bool,
-    metadata: dict[str, object],
-    warnings: list[str],
-) -> tuple[LinearPosterior, PolynomialBasis, float]:
-    """The posterior and basis after :func:`calibration.delay_terms.extend`, and its inflation.
-
-    The factor the covariance is to be inflated by for the misfit that remains is applied
-    by the caller after the identifiability check, which asks what the calibrators
-    determine, not how well the model fits.
-    """
-    terms = data.terms()
-    temps, q, var_q = data.stacked()
-    gammas = np.stack([s.gamma for s in data.sources.values()])
-    gamma_std = data.reflection_errors()
-    declared = data.temperature_variances()
-    offsets = declared if np.any(declared > 0) else None
-    correlation = float(data.reflection_correlation_channels)
-
-    def _shared(extra: FloatArray | float) -> FloatArray | None:
-        arr = np.broadcast_to(np.asarray(extra, dtype=float), q.shape)
-        return arr if np.any(arr > 0) else None
-
-    def relinearise(theta: FloatArray) -> Rows:
-        extra = reflection_variance(
-            theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
-        )
-        p = linearise(terms, temps, q, var_q, theta, extra)
-        return Rows(p.features, p.weights, p.response, offsets, _shared(extra), correlation)
-
-    b = basis.matrix(data.freq_hz, max(posterior.orders))
-    theta = evaluate_coefficients(posterior.mean, b, posterior.orders)
-    start = reflection_variance(
-        theta[:, None, :], gammas, data.gamma_rec, q, gamma_std, data.gamma_rec_std
-    )
-    rows = Rows(problem.features, problem.weights, problem.response, offsets, _shared(start),
-                correlation)
-    ext = extend(
-        rows, theta, posterior.mean.size, data.freq_hz, basis, scale_prior, relinearise,
-        search, at_ceiling=bool(metadata.get("orders_at_ceiling")),
-        noise_scale=float(posterior.noise_variance),
-    )
-    if ext is None:
-        return posterior, basis, 1.0
-    metadata.update(ext.metadata)
-    warnings.extend(ext.warnings)
-    if ext.model is not None:
-        posterior, basis = ext.model.posterior, ext.model.basis
-    return posterior, basis, max(ext.inflation, 1.0)
 
 
 @with_one_blas_thread
@@ -492,7 +401,7 @@ def solve_radiometric(
     used_basis: PolynomialBasis = basis
     inflation = 1.0
     if delay_terms and last.problem is not None:
-        posterior, used_basis, inflation = _beyond_box(
+        posterior, used_basis, inflation = beyond_box(
             data, posterior, basis, last.problem, prior.scale, choice.orders is None,
             metadata, warnings,
         )
