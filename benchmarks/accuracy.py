@@ -1,6 +1,6 @@
 """Accuracy benchmark: calibration error against the radiometer noise floor.
 
-For each simulated run (default :class:`~calibration.simulate.SimulationConfig`: 12
+For each simulated run (default :class:`~calibration.model.simulate.SimulationConfig`: 12
 calibrators, 50-130 MHz, 6554 channels, 600 s per Dicke position; seeds 0..19):
 
 * ``error`` = RMS over channels of (calibrated temperature of the *noiselessly* measured
@@ -28,13 +28,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from benchmarks.edges_cal_baseline import CTERMS, EDGES_LOADS, WTERMS, solve_edges
-from calibration.data import CalibrationData
-from calibration.noise_floor import noise_floor
-from calibration.polynomial_model import Orders, PolynomialParameters, coefficient_slices
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import SimulatedRun, SimulationConfig, simulate_run
-from calibration.solution import Solution
-from calibration.thesis_solver import solve_thesis
+from calibration.model.data import CalibrationData
+from calibration.model.polynomial_model import Orders, PolynomialParameters, coefficient_slices
+from calibration.model.simulate import SimulatedRun, SimulationConfig, simulate_run
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import solve_radiometric
+from calibration.solve.solution import Solution
+from calibration.solve.thesis_solver import solve_thesis
 
 FloatArray = NDArray[np.float64]
 

@@ -11,7 +11,7 @@ ripple on its noise waves (thesis section 3.1: a wave seen through a line of del
 with ``1 / tau`` one of 5, 10, 20 and 40 MHz, ``A`` log-uniform in 0.3-3 K and ``phi``
 uniform; 12 calibrators, 120 s a Dicke position, 50-130 MHz (820 channels; ``--full``:
 6554). The simulator's receiver is extended here (:class:`RippleTruth`), not in
-:mod:`calibration.simulate`.
+:mod:`calibration.model.simulate`.
 
 Per period, for the default solver and for it without delay terms (``delay_terms=False``,
 the previous default) on the same runs: RMS over runs of error / floor (the floor is the
@@ -31,16 +31,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.errors import IllPosedError
-from calibration.noise_floor import noise_floor
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import (
+from calibration.core.errors import IllPosedError
+from calibration.model.simulate import (
     ITPM_CHANNEL_WIDTH_HZ,
     ReceiverTruth,
     SimulatedRun,
     SimulationConfig,
     simulate_run,
 )
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import solve_radiometric
 
 FloatArray = NDArray[np.float64]
 PERIODS_MHZ = (5.0, 10.0, 20.0, 40.0)

@@ -8,7 +8,7 @@ temperature, each a little off it (uniform within +-1 K, a thermocouple's readin
 own load): without the hot load the calibrators span only ~2 K, the contrast that sets
 T_NS is small, and Gauss-Newton needs more than two steps from the thesis's start.
 
-Per family, for the default solver (iterated to :mod:`calibration.convergence`'s
+Per family, for the default solver (iterated to :mod:`calibration.solve.convergence`'s
 criterion) and for the previous default (two steps, ``max_steps=2``) on the same runs:
 
 * ``err/floor``: RMS over runs of (RMS over channels of the calibrated noiseless
@@ -32,12 +32,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.errors import IllPosedError
-from calibration.identifiability import CUT_T_NS
-from calibration.noise_floor import noise_floor
-from calibration.noise_waves import PARAMETERS
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import REACH_CALIBRATORS, SimulatedRun, SimulationConfig, simulate_run
+from calibration.core.errors import IllPosedError
+from calibration.model.noise_waves import PARAMETERS
+from calibration.model.simulate import (
+    REACH_CALIBRATORS,
+    SimulatedRun,
+    SimulationConfig,
+    simulate_run,
+)
+from calibration.solve.identifiability import CUT_T_NS
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import solve_radiometric
 
 #: Each unheated load's temperature is the room's plus a uniform offset within this (K).
 SPREAD_K = 1.0

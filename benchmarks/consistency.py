@@ -4,7 +4,7 @@ Run ``python -m benchmarks.consistency [--seeds N] [--null-seeds M] [--search]``
 runs (820 channels of 8 iTPM channels, 50-130 MHz, 600 s per Dicke position) of the twelve
 REACH calibrators and of the eight of thesis table 4.1; in each, one calibrator is given a
 stated temperature ``offset`` K above its true one (below, on odd seeds), and
-:func:`calibration.consistency.check_consistency` must name it (detection rate over
+:func:`calibration.checks.consistency.check_consistency` must name it (detection rate over
 seeds, per set, culprit and offset). With no wrong calibrator it must name none: the
 false-alarm rate over ``--null-seeds`` seeds per set, against the stated ``alpha = 0.01``.
 Orders are fixed at the truth's (4, 3, 4, 4, 3) unless ``--search`` (evidence search with
@@ -20,17 +20,17 @@ from dataclasses import replace
 
 import numpy as np
 
-from calibration.consistency import check_consistency
-from calibration.data import CalibrationData
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import (
+from calibration.checks.consistency import check_consistency
+from calibration.choice.model_fit import OrderChoice
+from calibration.model.data import CalibrationData
+from calibration.model.simulate import (
     ITPM_CHANNEL_WIDTH_HZ,
     REACH_CALIBRATORS,
     SimulationConfig,
     simulate_run,
 )
-from calibration.solution import Solution
+from calibration.solve.radiometric_solver import solve_radiometric
+from calibration.solve.solution import Solution
 
 TABLE_4_1 = ("cold", "hot", "c10r10", "c10r250", "c2r27", "c2r91", "r25", "r100")
 SETS = {"reach12": REACH_CALIBRATORS, "table4.1": TABLE_4_1}

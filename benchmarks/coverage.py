@@ -24,7 +24,7 @@ import sys
 import numpy as np
 
 from calibration import solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 WIDTH = ITPM_CHANNEL_WIDTH_HZ * 32
 ENSEMBLES = {

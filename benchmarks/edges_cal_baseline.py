@@ -19,7 +19,7 @@ Conventions (checked against the installed edges-cal 7.1.1 source):
   ``(P_src - P_L) / (P_NS - P_L)`` as ours.
 * Its M17 eq. 7 reads ``T_cal = (T* - t_load) C1 + t_load - C2`` with
   ``T_cal = T_src K1 + T_unc K2 + T_cos K3 + T_sin K4`` (``edges_cal.noise_waves.get_K``).
-  With our forward model (:mod:`calibration.noise_waves`) this holds exactly for
+  With our forward model (:mod:`calibration.model.noise_waves`) this holds exactly for
   ``C1 = T_NS / t_load_ns`` and ``C2 = t_load - T_L``; the noise-wave terms use the same
   ``F``, ``alpha = arg(Gamma F)`` and sign conventions, so no sign flips are needed.
 * Reflection coefficients are passed as callables of frequency (MHz, as edges-cal uses).
@@ -48,7 +48,7 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
         "the benchmarks compare against edges-cal: install it with pip install -e '.[bench]'"
     ) from exc
 
-from calibration.data import CalibrationData, SourceData
+from calibration.model.data import CalibrationData, SourceData
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]

@@ -7,10 +7,10 @@ posterior sd (:mod:`benchmarks.model_choice`), a Dicke position integrated 6 min
 410 or 820 channels. Per run, for the default solve and the truth's orders fixed (the
 baseline, in the same run):
 
-* the open and the short held out (:func:`calibration.validation.leave_one_out`): actual /
+* the open and the short held out (:func:`calibration.checks.validation.leave_one_out`): actual /
   predicted RMS error;
 * the binned residual chi-square per degree of freedom over the four loads
-  (:func:`calibration.model_checks.binned_chi_square`, 2 MHz bins at 820 channels).
+  (:func:`calibration.choice.model_checks.binned_chi_square`, 2 MHz bins at 820 channels).
 
 Printed: the medians over seeds against the issue's bounds (leave-one-out 0.7-1.4,
 binned 0.8-1.2), and the default's model size (mean coefficients, the truth's).
@@ -25,15 +25,15 @@ from functools import partial
 import numpy as np
 
 from benchmarks.model_choice import FOUR_LOADS, WIDTH, Ensemble, draw_truth, pilot_sd
-from calibration.conjugate import CoefficientPrior
-from calibration.data import CalibrationData
-from calibration.errors import CalibrationError
-from calibration.model_checks import binned_chi_square
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.simulate import simulate_run
-from calibration.solution import Solution
-from calibration.validation import leave_one_out
+from calibration.checks.validation import leave_one_out
+from calibration.choice.model_checks import binned_chi_square
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import CalibrationError
+from calibration.model.data import CalibrationData
+from calibration.model.simulate import simulate_run
+from calibration.regression.conjugate import CoefficientPrior
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
+from calibration.solve.solution import Solution
 
 HELD = ("c10open", "c10short")
 INTEGRATION_S = (360.0, 3600.0)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration import solve_radiometric
-from calibration.simulate import simulate_run
+from calibration.model.simulate import simulate_run
 from reach_receiver.cli import run_main
 
 SCHEDULE = Path(__file__).resolve().parents[1] / "schedules" / "calibrate.yaml"

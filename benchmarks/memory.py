@@ -71,9 +71,9 @@ def measure_here(seed: int = 0) -> dict[str, float | int | bool | str]:
     import numpy as np  # noqa: F401  (imports are part of the baseline)
     import scipy.linalg  # noqa: F401
 
-    from calibration.radiometric_solver import solve_radiometric
-    from calibration.simulate import SimulationConfig, simulate_run
-    from calibration.thesis_solver import solve_thesis
+    from calibration.model.simulate import SimulationConfig, simulate_run
+    from calibration.solve.radiometric_solver import solve_radiometric
+    from calibration.solve.thesis_solver import solve_thesis
 
     f_lo, f_hi = BAND_HZ
     config = SimulationConfig(

@@ -5,9 +5,10 @@ runs per ensemble). Each ensemble draws its own truths and runs, seeded; every m
 solves the same runs:
 
 * ``fixed 3000K``: the previous default, one fixed 3000 K width, the single best model;
-* ``best``: the hierarchical prior (:mod:`calibration.shrinkage`), the single best model;
-* ``averaged``: the default, the posterior averaged over models (:mod:`calibration.averaging`)
-  under a prior scale per parameter fitted to the data (:mod:`calibration.scale_fit`);
+* ``best``: the hierarchical prior (:mod:`calibration.regression.shrinkage`), the single best model;
+* ``averaged``: the default, the posterior averaged over models
+  (:mod:`calibration.choice.averaging`)
+  under a prior scale per parameter fitted to the data (:mod:`calibration.choice.scale_fit`);
 * ``shared scale``: averaged too, under one scale shared by the five parameters and
   marginalised (the default until the ensembles were drawn at the data's own sd);
 * ``shrink 6``: no choice of orders: six terms of every parameter under the hierarchical
@@ -17,14 +18,14 @@ solves the same runs:
 * ``own prior`` (random truths only): the ensemble's own prior, another oracle, which
   knows how the truths are drawn: every order combination of 1-6 terms equally likely,
   each higher term Gaussian with the sd of the drawn sizes
-  (:class:`~calibration.conjugate.TermPrior`, every model scored and averaged). What a
+  (:class:`~calibration.regression.conjugate.TermPrior`, every model scored and averaged). What a
   method that knew the ensemble could reach on the same runs: a bound the default cannot
   beat on average, and one its own noise may put above the issue's.
 
 Per method: the median and the RMS over runs of (RMS calibration error of the noiseless
 validation source) / (Cramer-Rao floor at the true orders); the RMS over runs of
 actual / predicted error; and the coverage of the calibration-only 68 % and 95 %
-intervals (:meth:`~calibration.solution.CalibratedSpectrum.interval`: for an averaged
+intervals (:meth:`~calibration.solve.solution.CalibratedSpectrum.interval`: for an averaged
 solution, the mixture's quantiles; 8 channels a run; with VNA noise, the receiver
 reflection's error, which the calibrated noiseless source carries too, is in both the
 interval and the floor).
@@ -53,21 +54,21 @@ from functools import partial
 
 import numpy as np
 
-from calibration.conjugate import CoefficientPrior, TermPrior
-from calibration.data import CalibrationData
-from calibration.errors import IllPosedError
-from calibration.model_fit import OrderChoice
-from calibration.noise_floor import noise_floor
-from calibration.noise_waves import PARAMETERS
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.shrinkage import ShrinkagePrior
-from calibration.simulate import (
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import IllPosedError
+from calibration.model.data import CalibrationData
+from calibration.model.noise_waves import PARAMETERS
+from calibration.model.simulate import (
     ITPM_CHANNEL_WIDTH_HZ,
     REACH_CALIBRATORS,
     SimulationConfig,
     simulate_run,
 )
-from calibration.solution import Solution
+from calibration.regression.conjugate import CoefficientPrior, TermPrior
+from calibration.regression.shrinkage import ShrinkagePrior
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
+from calibration.solve.solution import Solution
 
 LEVELS = {"unc": 250.0, "cos": 190.0, "sin": 90.0, "NS": 1116.0, "L": 300.0}
 #: EDGES' four loads: cold -> ambient, hot -> hot load, and the 10 m open and shorted cables.

@@ -19,12 +19,12 @@ import argparse
 import numpy as np
 
 from benchmarks.model_choice import FOUR_LOADS, Ensemble, draw_truth, pilot_sd
-from calibration.conjugate import CoefficientPrior
-from calibration.errors import CalibrationError
-from calibration.model_fit import OrderChoice
-from calibration.noise_floor import noise_floor
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.simulate import REACH_CALIBRATORS, simulate_run
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import CalibrationError
+from calibration.model.simulate import REACH_CALIBRATORS, simulate_run
+from calibration.regression.conjugate import CoefficientPrior
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
 
 FAMILIES = (
     Ensemble("quadratics at 2-6 sigma, 12 cal, 2 min", integration_s=120.0, truths="weak"),

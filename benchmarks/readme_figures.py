@@ -3,7 +3,7 @@
 Run ``python -m benchmarks.readme_figures`` (a few seconds). It simulates a run of the
 twelve REACH calibrators and the mock antenna (seed 1, 50-130 MHz, 600 s per Dicke
 position, channels of 8 iTPM channels, ~98 kHz, so that a panel's channels can be told
-apart), solves it with the default solver and writes, with :mod:`calibration.figures`:
+apart), solves it with the default solver and writes, with :mod:`calibration.report.figures`:
 
 * ``docs/figures/parameters.png``: the noise-wave parameters with their 68/95 % bands
   and the simulated truth;
@@ -23,10 +23,10 @@ from pathlib import Path
 from matplotlib.figure import Figure
 from PIL import Image
 
-from calibration import figures
-from calibration.figures.style import DPI
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.report import figures
+from calibration.report.figures.style import DPI
+from calibration.solve.radiometric_solver import solve_radiometric
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "figures"
 LIMIT_BYTES = 200_000

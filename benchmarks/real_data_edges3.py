@@ -30,14 +30,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from calibration import edges_text as et  # noqa: E402
-from calibration.data import CalibrationData  # noqa: E402
-from calibration.model_fit import OrderChoice  # noqa: E402
-from calibration.noise_floor import noise_floor  # noqa: E402
-from calibration.noise_waves import PARAMETERS, design_terms  # noqa: E402
-from calibration.radiometric_solver import solve_radiometric  # noqa: E402
-from calibration.rfi import calibrator_flags, flag_spectrum  # noqa: E402
-from calibration.thesis_solver import solve_thesis  # noqa: E402
+from calibration.checks.rfi import calibrator_flags, flag_spectrum  # noqa: E402
+from calibration.choice.model_fit import OrderChoice  # noqa: E402
+from calibration.io import edges_text as et  # noqa: E402
+from calibration.model.data import CalibrationData  # noqa: E402
+from calibration.model.noise_waves import PARAMETERS, design_terms  # noqa: E402
+from calibration.solve.noise_floor import noise_floor  # noqa: E402
+from calibration.solve.radiometric_solver import solve_radiometric  # noqa: E402
+from calibration.solve.thesis_solver import solve_thesis  # noqa: E402
 
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "edges3-2022-316"
 VNA_NAME = "edges3-2022-319-vna"  #: beside the run's directory
@@ -211,7 +211,7 @@ def corrections_table(directory: Path) -> None:
     best-known temperatures (the hot load's with the cable's loss): the uncorrected solver
     is trained on the hot load's thermistor reading, 0.15-0.30 K warmer than what the
     receiver sees. RFI: the files hold calibrated T* spectra, so the loads' reference and
-    noise-source spectra are constants and :func:`calibration.rfi.calibrator_flags` finds
+    noise-source spectra are constants and :func:`calibration.checks.rfi.calibrator_flags` finds
     nothing in them; the matched loads' own spectra are searched instead and the count is
     printed (the lab is shielded; at 5 sigma Gaussian noise alone flags almost nothing).
     """
@@ -261,8 +261,8 @@ def leave_one_out_table(directory: Path) -> None:
     import json
     import tempfile
 
-    from calibration.solution import Solution
-    from calibration.solution_file import read_solution
+    from calibration.io.solution_file import read_solution
+    from calibration.solve.solution import Solution
 
     variants: list[tuple[str, tuple[str, ...]]] = [("modelled S11s (s11_modelled.txt)", ())]
     vna = directory.parent / VNA_NAME

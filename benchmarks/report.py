@@ -1,19 +1,19 @@
 """Report benchmark: the time of ``write_report`` on a simulated 12-calibrator run.
 
 Run ``python -m benchmarks.report [--repeats 3]`` (about half a minute). It simulates the
-default run (:class:`~calibration.simulate.SimulationConfig`: the twelve REACH
+default run (:class:`~calibration.model.simulate.SimulationConfig`: the twelve REACH
 calibrators and the mock antenna, 6554 channels over 50-130 MHz, seed 1), writes it and
 its solution to files, as ``reach-cal report`` and ``reach-run`` find them, and times,
 each the median of ``--repeats`` in this process after one untimed report (the first
 pays for matplotlib's imports and font cache, once per process):
 
-* **report**: :func:`calibration.report.write_report` with the run, all seven figures
+* **report**: :func:`calibration.report.writer.write_report` with the run, all seven figures
   and the summary (target: under 3 s);
 * **figures, fixed layout**: the figures alone as the report draws them (margins in
-  inches, :func:`calibration.figures.style.grid`);
+  inches, :func:`calibration.report.figures.style.grid`);
 * **figures, constrained layout**: the same figures with matplotlib's constrained
   layout engine set before saving, as every figure was drawn before: the baseline;
-* **solve**: :func:`~calibration.radiometric_solver.solve_radiometric` on the run,
+* **solve**: :func:`~calibration.solve.radiometric_solver.solve_radiometric` on the run,
   for scale.
 
 Wall times (``time.perf_counter``) and the process's CPU time are both printed: on a
@@ -29,12 +29,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from calibration import figures
-from calibration.hdf5_io import write_run
-from calibration.radiometric_solver import solve_radiometric
-from calibration.report import calibrate_run, figure_builders, load_inputs, write_report
-from calibration.simulate import SimulationConfig, simulate_run
-from calibration.solution_file import write_solution
+from calibration.io.hdf5_io import write_run
+from calibration.io.solution_file import write_solution
+from calibration.model.simulate import SimulationConfig, simulate_run
+from calibration.report import figures
+from calibration.report.writer import calibrate_run, figure_builders, load_inputs, write_report
+from calibration.solve.radiometric_solver import solve_radiometric
 
 #: The issue's target for one report (s).
 TARGET_S = 3.0

@@ -6,7 +6,7 @@ correct` (the ``calibrate`` step's corrections) from a run with every effect of
 termination, the hot load's cable, RFI spikes). Each error ``RMS(T_cal(Q) - T_true(Q))``
 over the channels used (``T_true`` the sky at the sources' plane,
 :meth:`~reach_receiver.sim.physics.ReceiverPhysics.true_temperature_k`) is set against
-the noise floor of that data (:func:`calibration.noise_floor.noise_floor` at the fitted
+the noise floor of that data (:func:`calibration.solve.noise_floor.noise_floor` at the fitted
 parameters)::
 
     python -m benchmarks.sim_corrections [--path engine|run] [--seeds 1 2 3 4 5]
@@ -43,9 +43,9 @@ import h5py
 import numpy as np
 
 from calibration import CalibrationData, solve_radiometric
-from calibration.data import SourceData
-from calibration.noise_floor import noise_floor
-from calibration.simulate import REACH_CALIBRATORS
+from calibration.model.data import SourceData
+from calibration.model.simulate import REACH_CALIBRATORS
+from calibration.solve.noise_floor import noise_floor
 from reach_receiver.clock import ManualClock
 from reach_receiver.run.session import RunSession
 from reach_receiver.sim.effects import SimEffects

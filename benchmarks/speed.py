@@ -20,7 +20,7 @@ The timings run in fresh subprocesses, twice: with the BLAS threading as install
 equivalents). On a 2-core machine that other processes keep busy, multi-threaded OpenBLAS
 spin-waits for descheduled threads and every solver slows down several-fold; the
 single-threaded numbers show the code's own speed. The radiometric solver runs its BLAS on
-one thread whatever is installed (:mod:`calibration.blas_threads`): its thousands of small
+one thread whatever is installed (:mod:`calibration.core.blas_threads`): its thousands of small
 calls were twice as slow on two threads, on an idle machine too.
 """
 
@@ -38,10 +38,10 @@ import numpy as np
 
 from benchmarks.accuracy import FOUR_LOADS
 from benchmarks.edges_cal_baseline import solve_edges
-from calibration.conjugate import CoefficientPrior
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.simulate import SimulatedRun, SimulationConfig, simulate_run
-from calibration.thesis_solver import solve_thesis
+from calibration.model.simulate import SimulatedRun, SimulationConfig, simulate_run
+from calibration.regression.conjugate import CoefficientPrior
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
+from calibration.solve.thesis_solver import solve_thesis
 
 #: Target for our full solve + calibrate with model averaging, 12 cal x 6554 channels (s).
 TARGET_SECONDS = 0.1

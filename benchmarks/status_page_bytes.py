@@ -158,7 +158,7 @@ def measure(url: str, reloads: int, interval_s: float) -> dict[str, list[int]]:
 
 def formats(state: Path) -> None:
     """Each figure of the run just made drawn both ways: the palette PNG and the SVG."""
-    from calibration.figures.style import DPI
+    from calibration.report.figures.style import DPI
     from reach_receiver.daemon.status_figures import FIGURES
     from reach_receiver.daemon.status_page import image_formats
     from reach_receiver.monitor.database import MetricsDatabase

@@ -2,19 +2,26 @@
 
 Pure numerics with its own file readers; usable without any hardware package::
 
-    from calibration import simulate_run, solve_radiometric, noise_floor
-    run = simulate_run(rng=1)
-    solution = solve_radiometric(run.data)          # evidence-chosen orders
-    spectrum = solution.calibrate(run.data.freq_hz, run.data.gamma_rec, run.validation,
-                                  run.data.channel_width_hz)
+    from calibration import read_run, solve_radiometric, noise_floor
+    data, sources = read_run("run.h5")
+    solution = solve_radiometric(data)              # evidence-chosen orders
+    spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, sources["ant"],
+                                  data.channel_width_hz)
 
-Modules: :mod:`~calibration.noise_waves` (forward model, thesis eqs. 3.9-3.27),
-:mod:`~calibration.data` (containers and checks), :mod:`~calibration.simulate`,
-:mod:`~calibration.thesis_solver` (EXCALIBRATE, the published baseline),
-:mod:`~calibration.radiometric_solver` (the default, floor-reaching solver),
-:mod:`~calibration.noise_floor` (Cramer-Rao floor), :mod:`~calibration.order_search`,
-:mod:`~calibration.one_port` (short-open-load VNA calibration) with
-:mod:`~calibration.cal_kit` (Keysight-style calibration-kit models).
+The engine is nine subpackages, each one concept, each importing only from those above
+it in this list (``tests/test_layers.py`` holds the order, README's "Engine layers"):
+
+* :mod:`calibration.core`: errors, names and constants, crash-safe files, BLAS threads.
+* :mod:`calibration.rf`: Touchstone files, one- and two-port corrections, cal kits, cables.
+* :mod:`calibration.model`: the forward model (thesis eqs. 3.9-3.27), data containers,
+  simulation, source temperatures, the instruments' stated errors.
+* :mod:`calibration.regression`: normal equations, conjugate Bayesian regression, priors.
+* :mod:`calibration.choice`: model choice: order search, prior scales, model averaging.
+* :mod:`calibration.solve`: the solvers, their solutions, the noise floor.
+* :mod:`calibration.checks` and :mod:`calibration.io`: what is checked in data and
+  solutions (validation, consistency, RFI, the VNA's systematics); the files (HDF5 run
+  and solution files, EDGES and raw VNA importers).
+* :mod:`calibration.report`, then :mod:`calibration.cli` (``reach-cal``).
 
 The names below are imported on first use (PEP 562), not with the package: a program
 that needs one module of the engine (the daemon reading a site file, a CLI's ``--help``)
@@ -24,64 +31,68 @@ does not pay for importing all of it.
 from __future__ import annotations
 
 import importlib
-import sys
-import types
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .basis import PolynomialBasis
-    from .cal_kit import IDEAL_KIT, CalKit
-    from .conjugate import CoefficientPrior, LinearPosterior, ScalePrior
-    from .data import CalibrationData, Integration, SourceData
-    from .errors import (
+    from .choice.model_fit import OrderChoice
+    from .core.errors import (
         CalibrationError,
         DegenerateStandardsError,
         FileFormatError,
         IllPosedError,
         InvalidDataError,
     )
-    from .model_fit import OrderChoice
-    from .noise_floor import NoiseFloor, noise_floor
-    from .noise_waves import PARAMETERS
-    from .one_port import OnePortTerms, correct_reflection, embed_reflection, solve_one_port
-    from .radiometric_solver import RadiometricPrior, solve_radiometric
-    from .simulate import SimulatedRun, SimulationConfig, simulate_run
-    from .solution import CalibratedSpectrum, Solution
-    from .thesis_solver import ThesisPrior, solve_thesis
+    from .io.hdf5_io import read_run, write_run
+    from .io.solution_file import read_solution, write_solution
+    from .model.basis import PolynomialBasis
+    from .model.data import CalibrationData, Integration, SourceData
+    from .model.noise_waves import PARAMETERS
+    from .model.simulate import SimulatedRun, SimulationConfig, simulate_run
+    from .regression.conjugate import CoefficientPrior, LinearPosterior, ScalePrior
+    from .rf.cal_kit import IDEAL_KIT, CalKit
+    from .rf.one_port import OnePortTerms, correct_reflection, embed_reflection, solve_one_port
+    from .solve.noise_floor import NoiseFloor, noise_floor
+    from .solve.radiometric_solver import RadiometricPrior, solve_radiometric
+    from .solve.solution import CalibratedSpectrum, Solution
+    from .solve.thesis_solver import ThesisPrior, solve_thesis
 
 #: Each public name and the module that defines it.
 _WHERE = {
-    "PolynomialBasis": "basis",
-    "IDEAL_KIT": "cal_kit",
-    "CalKit": "cal_kit",
-    "CoefficientPrior": "conjugate",
-    "LinearPosterior": "conjugate",
-    "ScalePrior": "conjugate",
-    "CalibrationData": "data",
-    "Integration": "data",
-    "SourceData": "data",
-    "CalibrationError": "errors",
-    "DegenerateStandardsError": "errors",
-    "FileFormatError": "errors",
-    "IllPosedError": "errors",
-    "InvalidDataError": "errors",
-    "OrderChoice": "model_fit",
-    "NoiseFloor": "noise_floor",
-    "noise_floor": "noise_floor",
-    "PARAMETERS": "noise_waves",
-    "OnePortTerms": "one_port",
-    "correct_reflection": "one_port",
-    "embed_reflection": "one_port",
-    "solve_one_port": "one_port",
-    "RadiometricPrior": "radiometric_solver",
-    "solve_radiometric": "radiometric_solver",
-    "SimulatedRun": "simulate",
-    "SimulationConfig": "simulate",
-    "simulate_run": "simulate",
-    "CalibratedSpectrum": "solution",
-    "Solution": "solution",
-    "ThesisPrior": "thesis_solver",
-    "solve_thesis": "thesis_solver",
+    "OrderChoice": "choice.model_fit",
+    "CalibrationError": "core.errors",
+    "DegenerateStandardsError": "core.errors",
+    "FileFormatError": "core.errors",
+    "IllPosedError": "core.errors",
+    "InvalidDataError": "core.errors",
+    "read_run": "io.hdf5_io",
+    "write_run": "io.hdf5_io",
+    "read_solution": "io.solution_file",
+    "write_solution": "io.solution_file",
+    "PolynomialBasis": "model.basis",
+    "CalibrationData": "model.data",
+    "Integration": "model.data",
+    "SourceData": "model.data",
+    "PARAMETERS": "model.noise_waves",
+    "SimulatedRun": "model.simulate",
+    "SimulationConfig": "model.simulate",
+    "simulate_run": "model.simulate",
+    "CoefficientPrior": "regression.conjugate",
+    "LinearPosterior": "regression.conjugate",
+    "ScalePrior": "regression.conjugate",
+    "IDEAL_KIT": "rf.cal_kit",
+    "CalKit": "rf.cal_kit",
+    "OnePortTerms": "rf.one_port",
+    "correct_reflection": "rf.one_port",
+    "embed_reflection": "rf.one_port",
+    "solve_one_port": "rf.one_port",
+    "NoiseFloor": "solve.noise_floor",
+    "noise_floor": "solve.noise_floor",
+    "RadiometricPrior": "solve.radiometric_solver",
+    "solve_radiometric": "solve.radiometric_solver",
+    "CalibratedSpectrum": "solve.solution",
+    "Solution": "solve.solution",
+    "ThesisPrior": "solve.thesis_solver",
+    "solve_thesis": "solve.thesis_solver",
 }
 
 __all__ = [
@@ -112,28 +123,15 @@ __all__ = [
     "correct_reflection",
     "embed_reflection",
     "noise_floor",
+    "read_run",
+    "read_solution",
     "simulate_run",
     "solve_one_port",
     "solve_radiometric",
     "solve_thesis",
+    "write_run",
+    "write_solution",
 ]
-
-
-class _Package(types.ModuleType):
-    """The package, whose public names win over its submodules of the same name.
-
-    Importing ``calibration.noise_floor`` (the module) sets the package's attribute
-    ``noise_floor``; the public name is the function :func:`noise_floor.noise_floor`, as
-    it was when the package imported everything up front.
-    """
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if isinstance(value, types.ModuleType) and _WHERE.get(name) == name:
-            value = getattr(value, name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
 
 
 def __getattr__(name: str) -> Any:

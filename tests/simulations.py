@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 
 from calibration import CalibrationData
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 
 #: Thesis 4.2.1: constant noise-wave parameters (K).
 CONSTANT_TRUTH = {"unc": [250.0], "cos": [190.0], "sin": [90.0], "NS": [1200.0], "L": [298.0]}

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from benchmarks.beyond_box import draw_run
-from calibration.basis import DelayBasis
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
-from calibration.solution import Solution
-from calibration.solution_file import read_solution, write_solution
+from calibration.choice.model_fit import OrderChoice
+from calibration.io.solution_file import read_solution, write_solution
+from calibration.model.basis import DelayBasis
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.radiometric_solver import solve_radiometric
+from calibration.solve.solution import Solution
 
 
 @pytest.mark.parametrize(("period_mhz", "seed"), [(5.0, 1), (10.0, 2)])

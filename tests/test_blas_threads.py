@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from calibration.blas_threads import one_blas_thread, with_one_blas_thread
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.core.blas_threads import one_blas_thread, with_one_blas_thread
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.radiometric_solver import solve_radiometric
 
 
 def blas_threads(controller: ThreadpoolController) -> list[int]:

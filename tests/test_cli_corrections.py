@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from calibration.cli import main
-from calibration.hdf5_io import read_run, write_run
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
-from calibration.solution_file import read_solution
+from calibration.io.hdf5_io import read_run, write_run
+from calibration.io.solution_file import read_solution
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ
 
 ORDERS = ["--orders", "4,3,4,4,3"]
 

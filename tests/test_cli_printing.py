@@ -12,15 +12,15 @@ import re
 import numpy as np
 import pytest
 
+from calibration.checks.temperature_sanity import CELSIUS_SLIP_K as ENGINE_SLIP_K
+from calibration.choice.model_fit import DEFAULT_MAX_ORDERS, OrderChoice
 from calibration.cli import main
 from calibration.cli.args import AUTO_BOX_START, AUTO_BOX_STEP, CELSIUS_SLIP_K
 from calibration.cli.main import build_parser
-from calibration.hdf5_io import read_run, write_run
-from calibration.model_fit import DEFAULT_MAX_ORDERS, OrderChoice
-from calibration.model_used import model_used_line
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
-from calibration.solution_file import read_solution, write_solution
-from calibration.temperature_sanity import CELSIUS_SLIP_K as ENGINE_SLIP_K
+from calibration.io.hdf5_io import read_run, write_run
+from calibration.io.solution_file import read_solution, write_solution
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ
+from calibration.report.model_used import model_used_line
 
 WIDTH = str(16 * ITPM_CHANNEL_WIDTH_HZ)
 FOUR = "cold,hot,c10open,c10short"

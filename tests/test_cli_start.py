@@ -15,8 +15,9 @@ import sys
 import pytest
 
 HEAVY = ("numpy", "astropy", "matplotlib", "h5py", "scipy", "calibration")
-#: The engine's table of names the site file checks its solver against: no imports.
-LIGHT = ("calibration", "calibration.constants")
+#: The engine's table of names the site file checks its solver against: no imports (the
+#: subpackage's ``__init__`` is a docstring).
+LIGHT = ("calibration", "calibration.core", "calibration.core.constants")
 PROBE = """\
 import contextlib, io, json, sys
 from {module} import {main}
@@ -59,8 +60,9 @@ def test_help_and_version_import_nothing_heavy(main, argv):
 
 #: reach-cal's parsers: the package, its constants and errors, and the cli's parser modules
 #: (with the kit file's format, text that import's --help prints).
-CAL_PARSER = ("calibration.errors", "calibration.cli", "calibration.cli.main",
-              "calibration.cli.args", "calibration.cli.import_parser", "calibration.kit_format")
+CAL_PARSER = ("calibration.core.errors", "calibration.cli", "calibration.cli.main",
+              "calibration.cli.args", "calibration.cli.import_parser", "calibration.rf",
+              "calibration.rf.kit_format")
 
 
 @pytest.mark.parametrize("argv", [
@@ -92,12 +94,12 @@ def test_status_against_a_site_with_references_imports_nothing_heavy(tmp_path):
 
 
 def test_constants_are_the_engines_own():
-    """calibration.constants stands in for the engine's names; they must not drift apart."""
-    from calibration.cal_kit import STANDARD_NAMES
+    """calibration.core.constants stands in for the engine's names; they must not drift apart."""
+    from calibration.choice.model_fit import OrderChoice
     from calibration.cli import import_parser
-    from calibration.constants import ORDER_CEILING
-    from calibration.edges_text import INTEGRATION_PER_POSITION_S, UT141C
-    from calibration.model_fit import OrderChoice
+    from calibration.core.constants import ORDER_CEILING
+    from calibration.io.edges_text import INTEGRATION_PER_POSITION_S, UT141C
+    from calibration.rf.cal_kit import STANDARD_NAMES
 
     assert OrderChoice.ceiling == ORDER_CEILING
     assert import_parser.STANDARD_NAMES == STANDARD_NAMES

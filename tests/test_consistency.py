@@ -1,4 +1,4 @@
-"""Calibrator consistency (``calibration.consistency``): naming a calibrator stated wrong.
+"""Calibrator consistency (``calibration.checks.consistency``): naming a calibrator stated wrong.
 
 Simulated runs of 820 channels (8 iTPM channels each, 50-130 MHz, 600 s per Dicke
 position) with the twelve REACH calibrators and the eight of thesis table 4.1; one
@@ -24,17 +24,17 @@ import numpy as np
 import pytest
 from simulations import TABLE_4_1_ORDER
 
-from calibration.consistency import check_consistency, exclude_inconsistent
-from calibration.data import CalibrationData
-from calibration.errors import InvalidDataError
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import (
+from calibration.checks.consistency import check_consistency, exclude_inconsistent
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import InvalidDataError
+from calibration.model.data import CalibrationData
+from calibration.model.simulate import (
     ITPM_CHANNEL_WIDTH_HZ,
     REACH_CALIBRATORS,
     SimulationConfig,
     simulate_run,
 )
+from calibration.solve.radiometric_solver import solve_radiometric
 
 SETS = {"reach12": REACH_CALIBRATORS, "table4.1": TABLE_4_1_ORDER}
 WIDTH_HZ = 8 * ITPM_CHANNEL_WIDTH_HZ

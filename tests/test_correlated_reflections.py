@@ -1,4 +1,4 @@
-"""Reflection errors shared by neighbouring channels (calibration.correlated_reflections).
+"""Reflection errors shared by neighbouring channels (calibration.solve.correlated_reflections).
 
 The simulated VNA reads every reflection at sweep points ``L`` channels apart and splines
 them onto the channels (``SimulationConfig.vna_step_channels``), as the hand-over does.
@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from calibration import simulate_run, solve_radiometric
-from calibration.errors import InvalidDataError
-from calibration.hdf5_io import read_run, write_run
-from calibration.model_fit import OrderChoice
-from calibration.simulate import SimulationConfig
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import InvalidDataError
+from calibration.io.hdf5_io import read_run, write_run
+from calibration.model.simulate import SimulationConfig
 
 #: 1640 channels of 48.8 kHz: REACH's band at a quarter of its resolution, so that a
 #: sweep step of 8 channels is 390 kHz.
@@ -102,8 +102,8 @@ def test_the_sandwich_gram_is_the_dense_product_with_the_offsets_projection():
     """``X^T C^-1 D C^-1 X`` against dense matrices on a small problem (3 sources, 40
     channels), ``C^-1`` the fit's inverse covariance with each source's marginalised
     temperature offset (Woodbury) or without."""
-    from calibration.normal_equations import sandwich_gram
-    from calibration.polynomial_model import design_rows
+    from calibration.model.polynomial_model import design_rows
+    from calibration.regression.normal_equations import sandwich_gram
 
     rng = np.random.default_rng(3)
     m, n, layout = 3, 40, (3, 2, 2, 3, 1)

@@ -69,7 +69,7 @@ def test_an_ensemble_of_truths_and_set_ups_is_covered_at_the_nominal_rates(famil
     240 runs: within 4 and 2.5, 66.4-68.3 % and 93.8-96.0 % over five seeds), the median
     run's error bars are right in size, the RMS over runs of error / floor is within the
     issue's 1.10 and no run is ten times the floor off. Before the rows were corrected for
-    the reflections' errors (``calibration.errors_in_variables``) runs came out up to 235
+    the reflections' errors (``calibration.regression.errors_in_variables``) runs came out up to 235
     times the floor off and the RMS was 8-20. A few runs are refused (four calibrators
     that leave T_NS undetermined), at most a tenth."""
     ratios, honesty, hits, refused = family

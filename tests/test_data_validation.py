@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from calibration import CalibrationData, IllPosedError, InvalidDataError, OrderChoice
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import SimulationConfig, simulate_run
+from calibration.model.simulate import SimulationConfig, simulate_run
+from calibration.solve.radiometric_solver import solve_radiometric
 
 CFG = SimulationConfig(channel_width_hz=400e6 / 32768 * 32)
 

@@ -211,7 +211,7 @@ def test_unit_user_directories_and_command():
     assert re.search(r'^u\s+reach\s+-\s+"[^"]+"\s+/var/lib/reach\s*$', sysusers, re.M)
 
 
-#: A figure drawn and saved as calibration.figures does (Agg, no pyplot), in a new process.
+#: A figure drawn and saved as calibration.report.figures does (Agg, no pyplot), in a new process.
 DRAW = """
 import sys
 from matplotlib.backends.backend_agg import FigureCanvasAgg

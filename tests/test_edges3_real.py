@@ -6,7 +6,7 @@ How the bounds are set (fixed from the physics below, not fitted to the results)
 
 * Noise. ``sigma_f = |X_L T_NS| sqrt(var Q_f)``: the radiometer-limited error of one
   channel of a calibrated load, with ``var Q`` measured from the spectrum's own
-  channel-to-channel scatter (:func:`calibration.edges_text.empirical_q_variance`) and
+  channel-to-channel scatter (:func:`calibration.io.edges_text.empirical_q_variance`) and
   ``T_NS = 1000 sca`` from the *published* solution, so the bound does not depend on the
   fit under test. Its band RMS is the RMS a noise-limited calibration reaches (35 fitted
   coefficients over 11472 rows reduce it by only 0.15%). ``NOISE_MARGIN = 1.1`` allows
@@ -36,10 +36,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration import edges_text as et
-from calibration.model_fit import OrderChoice
-from calibration.noise_waves import design_terms
-from calibration.radiometric_solver import solve_radiometric
+from calibration.choice.model_fit import OrderChoice
+from calibration.io import edges_text as et
+from calibration.model.noise_waves import design_terms
+from calibration.solve.radiometric_solver import solve_radiometric
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "edges3-2022-316"
 pytestmark = pytest.mark.skipif(

@@ -1,7 +1,7 @@
 """Laboratory data in: the general EDGES importer, raw VNA exports, ``reach-cal import``.
 
 The real EDGES-3 run (``../shared/data/edges3-2022-316``, see ``tests/test_edges3_real.py``)
-checks that the new path gives what :func:`calibration.edges_text.load_edges3_run` gave:
+checks that the new path gives what :func:`calibration.io.edges_text.load_edges3_run` gave:
 the same arrays, bit for bit, through the run file, and the same solution. Raw VNA exports
 are made from known reflections with seeded random error terms and a modelled kit; their
 correction must return the reflections to the rounding of the arithmetic (1e-12).
@@ -15,24 +15,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration import edges_text as et
-from calibration.cal_kit import CalKit, LoadStandard, Offset, OpenStandard, ShortStandard
+from calibration.choice.model_fit import OrderChoice
 from calibration.cli import main
-from calibration.edges_import import (
+from calibration.core.errors import FileFormatError, InvalidDataError
+from calibration.io import edges_text as et
+from calibration.io.edges_import import (
     EdgesImport,
     EdgesLayout,
     MeasuredLoss,
     import_edges,
     read_gain_table,
 )
-from calibration.errors import FileFormatError, InvalidDataError
-from calibration.hdf5_io import read_run, run_noise_source_model, run_power_spectra
-from calibration.model_fit import OrderChoice
-from calibration.one_port import OnePortTerms
-from calibration.radiometric_solver import solve_radiometric
-from calibration.solution_file import read_solution
-from calibration.touchstone import read_touchstone, write_touchstone
-from calibration.vna_import import VnaLayout, correct_exports, read_cal_kit
+from calibration.io.hdf5_io import read_run, run_noise_source_model, run_power_spectra
+from calibration.io.solution_file import read_solution
+from calibration.io.vna_import import VnaLayout, correct_exports, read_cal_kit
+from calibration.rf.cal_kit import CalKit, LoadStandard, Offset, OpenStandard, ShortStandard
+from calibration.rf.one_port import OnePortTerms
+from calibration.rf.touchstone import read_touchstone, write_touchstone
+from calibration.solve.radiometric_solver import solve_radiometric
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "edges3-2022-316"
 needs_data = pytest.mark.skipif(

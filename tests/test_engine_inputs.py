@@ -17,8 +17,8 @@ import pytest
 from calibration.cli import main
 from calibration.cli.args import number_arg
 from calibration.cli.files import check_outputs
-from calibration.errors import InvalidDataError
-from calibration.solution_file import read_solution
+from calibration.core.errors import InvalidDataError
+from calibration.io.solution_file import read_solution
 
 CALIBRATORS = "cold,hot,r25,r100,c10open,c10short"
 

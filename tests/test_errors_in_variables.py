@@ -1,12 +1,16 @@
-"""The reflections' errors in the calibrators' rows (calibration.errors_in_variables)."""
+"""The reflections' errors in the calibrators' rows (calibration.regression.errors_in_variables)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from calibration.basis import PolynomialBasis
-from calibration.errors_in_variables import (
+from calibration.choice.model_fit import OrderChoice
+from calibration.model.basis import PolynomialBasis
+from calibration.model.noise_waves import design_terms
+from calibration.model.reflection_noise import reflection_variance
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.regression.errors_in_variables import (
     MU_MAX,
     Identified,
     corrected,
@@ -15,14 +19,10 @@ from calibration.errors_in_variables import (
     row_errors,
     unidentified_share,
 )
-from calibration.identifiability import CHOICE_SHARE
-from calibration.model_fit import OrderChoice
-from calibration.noise_floor import noise_floor
-from calibration.noise_waves import design_terms
-from calibration.normal_equations import build_normal_equations, evaluate_coefficients
-from calibration.radiometric_solver import linearise, solve_radiometric
-from calibration.reflection_noise import reflection_variance
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.regression.normal_equations import build_normal_equations, evaluate_coefficients
+from calibration.solve.identifiability import CHOICE_SHARE
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import linearise, solve_radiometric
 
 WIDTH = 8 * ITPM_CHANNEL_WIDTH_HZ  # 820 channels
 VNA_SIGMA = 1e-3
@@ -259,7 +259,7 @@ def test_a_truth_beyond_the_identified_box_is_found(seed):
 
 def test_fixed_orders_the_calibrators_cannot_identify_are_refused():
     """Fixed orders the reflections' errors would decide raise, naming the share."""
-    from calibration.errors import IllPosedError
+    from calibration.core.errors import IllPosedError
 
     with pytest.raises(IllPosedError, match="above their reflections' errors"):
         solve_radiometric(_weak_run(0).data, orders=OrderChoice.fixed(BOX))

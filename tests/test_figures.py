@@ -11,14 +11,14 @@ from matplotlib.text import Text
 from matplotlib.transforms import Bbox
 from scipy import stats
 
-from calibration import figures
-from calibration.conjugate import LinearPosterior
-from calibration.figures.parameters import evidence_profile, parameter_bands
-from calibration.figures.sources import SHOWN_CHOICE_SHARE
-from calibration.figures.style import DPI, WIDTH_IN
-from calibration.radiometric_solver import solve_radiometric
-from calibration.run_records import TemperatureLog
-from calibration.simulate import SimulationConfig, simulate_run
+from calibration.io.run_records import TemperatureLog
+from calibration.model.simulate import SimulationConfig, simulate_run
+from calibration.regression.conjugate import LinearPosterior
+from calibration.report import figures
+from calibration.report.figures.parameters import evidence_profile, parameter_bands
+from calibration.report.figures.sources import SHOWN_CHOICE_SHARE
+from calibration.report.figures.style import DPI, WIDTH_IN
+from calibration.solve.radiometric_solver import solve_radiometric
 
 #: 201 channels and six calibrators: every figure in about a second.
 CONFIG = SimulationConfig(

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from calibration.noise_waves import (
+from calibration.model.noise_waves import (
     design_terms,
     dicke_powers,
     model_q,
@@ -11,7 +11,7 @@ from calibration.noise_waves import (
     q_variance,
     source_temperature,
 )
-from calibration.simulate import SimulationConfig, simulate_run
+from calibration.model.simulate import SimulationConfig, simulate_run
 
 
 def test_matched_source_reduces_to_dicke_equation():

@@ -7,14 +7,14 @@ import h5py
 import numpy as np
 import pytest
 
-from calibration.averaging import MixturePosterior
-from calibration.errors import FileFormatError, InvalidDataError
-from calibration.hdf5_io import FORMAT_VERSION, read_run, read_truth, write_run
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
-from calibration.solution_file import read_solution, write_solution
-from calibration.thesis_solver import solve_thesis
+from calibration.choice.averaging import MixturePosterior
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import FileFormatError, InvalidDataError
+from calibration.io.hdf5_io import FORMAT_VERSION, read_run, read_truth, write_run
+from calibration.io.solution_file import read_solution, write_solution
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.radiometric_solver import solve_radiometric
+from calibration.solve.thesis_solver import solve_thesis
 
 CFG = SimulationConfig(channel_width_hz=16 * ITPM_CHANNEL_WIDTH_HZ)
 SOURCE_FIELDS = ("gamma", "p_source", "p_load", "p_ns", "temperature_k", "q_variance_override")

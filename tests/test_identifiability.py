@@ -12,17 +12,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.data import CalibrationData, Integration
-from calibration.edges_text import load_edges3_run
-from calibration.identifiability import (
+from calibration.choice.model_fit import OrderChoice
+from calibration.io.edges_text import load_edges3_run
+from calibration.model.data import CalibrationData, Integration
+from calibration.model.simulate import SimulationConfig, simulate_run, simulate_source
+from calibration.solve.identifiability import (
     PRIOR_DOMINATED,
     UndeterminedError,
     prior_dominated_line,
 )
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import SimulationConfig, simulate_run, simulate_source
-from calibration.thesis_solver import solve_thesis
+from calibration.solve.radiometric_solver import solve_radiometric
+from calibration.solve.thesis_solver import solve_thesis
 
 FOUR_LOADS = ("cold", "hot", "c10open", "c10short")
 SOLVERS = {"radiometric": solve_radiometric, "thesis": solve_thesis}
@@ -165,7 +165,7 @@ def test_a_box_whose_top_terms_take_t_ns_through_zero_is_cut_not_refused(seed):
     at the floor. Now the box loses its top terms until the fits keep T_NS positive, and
     the solve recovers the antenna within twice the floor, its error bars within 1.5 of
     the error."""
-    from calibration.noise_floor import noise_floor
+    from calibration.solve.noise_floor import noise_floor
     from tests.test_errors_in_variables import _weak_run
 
     run = _weak_run(seed, vna_sigma=0.0)
@@ -183,7 +183,7 @@ def test_a_box_whose_top_terms_take_t_ns_through_zero_is_cut_not_refused(seed):
 
 def test_a_summary_names_the_box_cut_and_why():
     """The cut of the test above is named where the orders are printed, with its reason."""
-    from calibration.identifiability import box_cut_line, caution_lines
+    from calibration.solve.identifiability import box_cut_line, caution_lines
     from tests.test_errors_in_variables import _weak_run
 
     solution = solve_radiometric(_weak_run(0, vna_sigma=0.0).data)
@@ -201,7 +201,7 @@ def test_a_summary_says_where_the_reflections_errors_leave_models_unidentified()
     some beyond it: the note names both boxes, not a cut (``identified_line``). Fixed orders
     those errors decide, solved anyway with ``allow_prior_dominated``, are warned of with
     their share of the information (``uncorrected_line``)."""
-    from calibration.identifiability import (
+    from calibration.solve.identifiability import (
         box_cut_line,
         caution_lines,
         identified_line,
@@ -231,10 +231,10 @@ def test_a_source_the_averaged_models_disagree_on_is_noted(tmp_path, capsys):
     0.39-0.83 over the eight seeds of the test in test_errors_in_variables). ``reach-cal
     apply`` says so; twelve calibrators (0.004-0.006) do not."""
     from calibration.cli import main
-    from calibration.hdf5_io import write_run
-    from calibration.identifiability import CHOICE_SHARE, model_choice_line
-    from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ
-    from calibration.solution_file import write_solution
+    from calibration.io.hdf5_io import write_run
+    from calibration.io.solution_file import write_solution
+    from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ
+    from calibration.solve.identifiability import CHOICE_SHARE, model_choice_line
     from tests.test_errors_in_variables import beyond_run
 
     run = beyond_run(6)

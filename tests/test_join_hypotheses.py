@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from calibration.averaging import join_hypotheses, mixture_of
-from calibration.conjugate import LinearPosterior
+from calibration.choice.averaging import join_hypotheses, mixture_of
+from calibration.regression.conjugate import LinearPosterior
 
 
 def _posterior(orders, rng, log_evidence=0.0):

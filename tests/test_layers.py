@@ -116,3 +116,78 @@ def test_the_check_catches_an_upward_import(tmp_path, module, text, expected):
     }
     (found,) = violations(tmp_path, ranks)
     assert expected in found
+
+
+def engine_table(readme: str) -> dict[str, int]:
+    """Engine subpackage -> rank, from the README table under '### Engine layers'."""
+    section = readme.split("### Engine layers", 1)[1].split("\n#", 1)[0]
+    ranks: dict[str, int] = {}
+    for row in section.splitlines():
+        cells = [c.strip() for c in row.strip().strip("|").split("|")]
+        if len(cells) >= 2 and cells[0].isdigit():
+            ranks[cells[1].strip("`")] = int(cells[0])
+    return ranks
+
+
+def engine_unit(module: str) -> str:
+    """The engine subpackage a module belongs to: ``calibration.<first>``."""
+    return ".".join(module.split(".")[:2])
+
+
+def engine_violations(root: Path, ranks: dict[str, int]) -> list[str]:
+    """Every import inside the engine against its table: upward, sideways, unlisted."""
+    found = []
+    for importer, imported, where in imports(root):
+        if not (importer.startswith(f"{ENGINE}.") and imported.startswith(f"{ENGINE}.")):
+            continue
+        a, b = engine_unit(importer), engine_unit(imported)
+        if a == b:
+            continue
+        if a not in ranks or b not in ranks:
+            found.append(f"{where}: {a if a not in ranks else b} is not in README's engine table")
+        elif ranks[b] >= ranks[a]:
+            found.append(f"{where}: {a} (rank {ranks[a]}) imports {b} (rank {ranks[b]})")
+    return found
+
+
+def test_the_engine_s_imports_go_down_its_table():
+    ranks = engine_table((ROOT / "README.md").read_text())
+    assert engine_violations(ROOT, ranks) == []
+
+
+def test_the_engine_table_lists_exactly_its_subpackages():
+    ranks = engine_table((ROOT / "README.md").read_text())
+    existing = {f"{ENGINE}.{p.name}" for p in (ROOT / ENGINE).iterdir()
+                if (p / "__init__.py").exists()}
+    assert set(ranks) == existing
+    assert not [p.name for p in (ROOT / ENGINE).glob("*.py") if p.name != "__init__.py"]
+
+
+def test_an_engine_subpackage_s_init_imports_nothing():
+    """A subpackage's ``__init__`` is its docstring: importing one part costs no other.
+
+    ``calibration.cli``, the top, holds ``reach-cal``'s entry point (``calibration.cli:main``).
+    """
+    for init in (ROOT / ENGINE).glob("*/__init__.py"):
+        if init.parent.name == "cli":
+            continue
+        body = ast.parse(init.read_text()).body
+        assert ast.get_docstring(ast.parse(init.read_text())), init
+        assert not [n for n in body if isinstance(n, (ast.Import, ast.ImportFrom))], init
+
+
+@pytest.mark.parametrize(
+    ("module", "text"),
+    [
+        ("rf/bad.py", "from ..solve.solution import Solution\n"),  # upward
+        ("io/bad.py", "def f():\n    from calibration.checks import rfi\n"),  # sideways
+    ],
+)
+def test_the_engine_check_catches_an_upward_or_sideways_import(tmp_path, module, text):
+    for package in ("rf", "solve", "checks", "io"):
+        (tmp_path / ENGINE / package).mkdir(parents=True)
+        (tmp_path / ENGINE / package / "__init__.py").write_text('"""x."""\n')
+    (tmp_path / ENGINE / module).write_text(text)
+    ranks = {f"{ENGINE}.rf": 1, f"{ENGINE}.solve": 5, f"{ENGINE}.checks": 6, f"{ENGINE}.io": 6}
+    (found,) = engine_violations(tmp_path, ranks)
+    assert "imports" in found

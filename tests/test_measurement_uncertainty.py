@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import InvalidDataError
-from calibration.measurement_uncertainty import (
+from calibration.core.errors import InvalidDataError
+from calibration.model.measurement_uncertainty import (
     AccuracyBand,
     VnaAccuracy,
     check_noise_source,

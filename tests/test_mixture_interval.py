@@ -6,10 +6,10 @@ from scipy import stats
 from scipy.optimize import brentq
 
 from calibration import solve_radiometric
-from calibration.averaging import MixturePosterior
-from calibration.mixture_interval import ChannelMixture, central_interval
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
-from calibration.solution import CalibratedSpectrum
+from calibration.choice.averaging import MixturePosterior
+from calibration.choice.mixture_interval import ChannelMixture, central_interval
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.solution import CalibratedSpectrum
 
 
 def _brute_quantile(w, means, sds, dofs, q):

@@ -17,29 +17,29 @@ import itertools
 import numpy as np
 import pytest
 
-from calibration.averaging import MixturePosterior, mixture_of, with_smooth_hypothesis
-from calibration.conjugate import (
+from calibration.choice.averaging import MixturePosterior, mixture_of, with_smooth_hypothesis
+from calibration.choice.model_fit import OrderChoice, significant_orders
+from calibration.choice.order_search import search_orders_jointly
+from calibration.choice.parameter_scales import draw_scales, evidence_gradient
+from calibration.core.errors import IllPosedError
+from calibration.model.polynomial_model import full_indices
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.regression.conjugate import (
     CoefficientPrior,
     LinearPosterior,
     ScalePrior,
     solve,
     solve_many,
 )
-from calibration.errors import IllPosedError
-from calibration.model_fit import OrderChoice, significant_orders
-from calibration.noise_floor import noise_floor
-from calibration.order_search import search_orders_jointly
-from calibration.parameter_scales import draw_scales, evidence_gradient
-from calibration.polynomial_model import full_indices
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.shrinkage import (
+from calibration.regression.shrinkage import (
     EvidenceGrid,
     ShrinkagePrior,
     log_evidence_scales,
     log_scale_density,
     marginal_log_evidence,
 )
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
 
 COARSE = ITPM_CHANNEL_WIDTH_HZ * 8  # 820 channels: the same physics, faster runs
 RANDOM_RUNS = 60
@@ -47,9 +47,9 @@ RANDOM_RUNS = 60
 
 def normal_equations_of(data, largest=(6, 6, 6, 6, 6)):
     """The radiometric solver's normal equations for ``data`` (its own ``build``)."""
-    from calibration.basis import PolynomialBasis
-    from calibration.normal_equations import evaluate_coefficients
-    from calibration.radiometric_solver import LinearisedProblem, _normal_equations, linearise
+    from calibration.model.basis import PolynomialBasis
+    from calibration.regression.normal_equations import evaluate_coefficients
+    from calibration.solve.radiometric_solver import LinearisedProblem, _normal_equations, linearise
 
     basis = PolynomialBasis.for_frequencies(data.freq_hz, "legendre")
     b = basis.matrix(data.freq_hz, max(largest))

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from benchmarks.model_choice import FOUR_LOADS, WIDTH, Ensemble, draw_truth, pilot_sd
-from calibration.conjugate import CoefficientPrior
-from calibration.model_checks import binned_chi_square, fit_warnings
-from calibration.model_fit import OrderChoice
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.simulate import REACH_CALIBRATORS, SimulationConfig, simulate_run
-from calibration.validation import HeldOut, LeaveOneOutReport, leave_one_out
+from calibration.checks.validation import HeldOut, LeaveOneOutReport, leave_one_out
+from calibration.choice.model_checks import binned_chi_square, fit_warnings
+from calibration.choice.model_fit import OrderChoice
+from calibration.model.simulate import REACH_CALIBRATORS, SimulationConfig, simulate_run
+from calibration.regression.conjugate import CoefficientPrior
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
 
 SMALL = WIDTH * 4  # 205 channels
 
@@ -136,7 +136,7 @@ def test_four_loads_leave_one_out_and_binned_residuals_match_the_noise(seed):
 def test_the_thesis_solvers_sigma_is_not_judged_as_a_noise_scale():
     """Its noise variance is sigma^2 in K^2 (0.08 here), not a scale on the radiometer
     equation: no "s^2 far from 1" sentence for it."""
-    from calibration.thesis_solver import solve_thesis
+    from calibration.solve.thesis_solver import solve_thesis
 
     solution = solve_thesis(_run(REACH_CALIBRATORS, seed=6).data)
     assert not 0.8 <= solution.posterior.noise_variance <= 1.25

@@ -8,7 +8,8 @@ import skrf
 from skrf.calibration import OnePort
 from skrf.media import DefinedGammaZ0
 
-from calibration.cal_kit import (
+from calibration.core.errors import DegenerateStandardsError, InvalidDataError
+from calibration.rf.cal_kit import (
     IDEAL_KIT,
     CalKit,
     LoadStandard,
@@ -17,8 +18,7 @@ from calibration.cal_kit import (
     ShortStandard,
     offset_reflection,
 )
-from calibration.errors import DegenerateStandardsError, InvalidDataError
-from calibration.one_port import (
+from calibration.rf.one_port import (
     OnePortTerms,
     correct_reflection,
     embed_reflection,

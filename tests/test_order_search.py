@@ -4,7 +4,7 @@ import itertools
 
 import pytest
 
-from calibration.order_search import search_orders
+from calibration.choice.order_search import search_orders
 
 
 def plateau_surface(orders):
@@ -31,7 +31,7 @@ def test_lookahead_escapes_plateau_from_the_smallest_model():
 def test_single_step_climb_from_small_model_stalls():
     # Without the extra start at the largest model and without lookahead the climb stalls,
     # which is the failure the search is built to avoid.
-    from calibration.order_search import _neighbours
+    from calibration.choice.order_search import _neighbours
 
     current = (1, 2, 2, 2, 2)
     neighbours = list(_neighbours(current, 1, (1,) * 5, (6,) * 5))

@@ -1,4 +1,4 @@
-"""Per-channel solvers (thesis 4.7 least squares, 4.8 Bayesian): calibration.per_frequency.
+"""Per-channel solvers (thesis 4.7 least squares, 4.8 Bayesian): calibration.solve.per_frequency.
 
 All runs are seeded; the band is the REACH one at 16 iTPM channels per channel (410
 channels), so the whole file runs in a few seconds.
@@ -12,22 +12,22 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from calibration.data import CalibrationData, Integration
-from calibration.errors import IllPosedError
-from calibration.per_frequency import (
-    ChannelSolution,
-    solve_bayesian_per_channel,
-    solve_least_squares_per_channel,
-)
-from calibration.radiometric_solver import linearise
-from calibration.reflections import lna_reflection, reach_source_reflection
-from calibration.simulate import (
+from calibration.core.errors import IllPosedError
+from calibration.model.data import CalibrationData, Integration
+from calibration.model.reflections import lna_reflection, reach_source_reflection
+from calibration.model.simulate import (
     ITPM_CHANNEL_WIDTH_HZ,
     SimulatedRun,
     SimulationConfig,
     simulate_run,
     simulate_source,
 )
+from calibration.solve.per_frequency import (
+    ChannelSolution,
+    solve_bayesian_per_channel,
+    solve_least_squares_per_channel,
+)
+from calibration.solve.radiometric_solver import linearise
 
 CONFIG = SimulationConfig(channel_width_hz=ITPM_CHANNEL_WIDTH_HZ * 16)
 SEED = 20240611
@@ -276,8 +276,8 @@ def test_a_channel_whose_least_squares_t_ns_crosses_zero_still_gets_its_posterio
     """6 calibrators, 10 ms a position: least squares puts T_NS <= 0 at a few channels
     (6 of 820 here), where the Gauss-Newton step cannot linearise; they start from the
     band's median T_NS instead, and the posterior still covers the truth (68 % +- 6)."""
-    from calibration.noise_waves import INDEX
-    from calibration.per_frequency import solve_least_squares_per_channel
+    from calibration.model.noise_waves import INDEX
+    from calibration.solve.per_frequency import solve_least_squares_per_channel
 
     config = SimulationConfig(
         calibrators=("cold", "hot", "r25", "r100", "c10open", "c10short"),

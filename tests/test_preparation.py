@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import InvalidDataError
-from calibration.preparation import (
+from calibration.checks.preparation import (
     band_flags,
     excision_flags,
     smooth_reflection,
     smoothing_width_hz,
     weighted_average,
 )
+from calibration.core.errors import InvalidDataError
 
 FREQ = np.linspace(50e6, 130e6, 801)  # 100 kHz channels
 SEEDS = range(10)

@@ -5,8 +5,8 @@ import pytest
 from scipy import stats
 
 from calibration import OrderChoice, RadiometricPrior, noise_floor, solve_radiometric, solve_thesis
-from calibration.conjugate import CoefficientPrior
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.regression.conjugate import CoefficientPrior
 
 SMALL = SimulationConfig(channel_width_hz=ITPM_CHANNEL_WIDTH_HZ * 8)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.radiometric_solver import solve_radiometric
+from calibration.solve.radiometric_solver import solve_radiometric
 from reach_receiver.cli import run_main
 from reach_receiver.clock import ManualClock
 from reach_receiver.run.report import write_run_report
@@ -83,7 +83,7 @@ def test_main_job_recovers_the_simulators_noise_waves(tmp_path, capsys):
     assert_the_report_is_the_solutions(run_file.parent / "report", solution)
 
 
-#: The report's figures of a run with a calibration (calibration.report.figure_builders).
+#: The report's figures of a run with a calibration (calibration.report.writer.figure_builders).
 REPORT_FIGURES = {"parameters", "evidence", "sources", "reflections", "dicke", "flags",
                   "temperatures"}
 

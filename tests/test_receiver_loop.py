@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from calibration import solve_radiometric
-from calibration.simulate import REACH_CALIBRATORS
+from calibration.model.simulate import REACH_CALIBRATORS
 from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.tc08 import Tc08
 from reach_receiver.devices.tec import Tec

@@ -14,23 +14,23 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from calibration import edges_text as et
 from calibration.cli import main
-from calibration.errors import InvalidDataError
-from calibration.hdf5_io import read_run
-from calibration.receiver_path import (
+from calibration.core.errors import InvalidDataError
+from calibration.io import edges_text as et
+from calibration.io.hdf5_io import read_run
+from calibration.io.receiver_path import (
     EDGES3_RECEIVER_CABLE,
     ReceiverCable,
     read_measured_path,
 )
-from calibration.touchstone import TouchstoneData, read_touchstone, write_touchstone_network
-from calibration.vna_import import (
+from calibration.io.vna_import import (
     KIT_EXAMPLE,
     VnaLayout,
     check_receiver_plane,
     correct_exports,
     read_cal_kit,
 )
+from calibration.rf.touchstone import TouchstoneData, read_touchstone, write_touchstone_network
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 VNA, RUN = SHARED / "edges3-2022-319-vna", SHARED / "edges3-2022-316"

@@ -7,14 +7,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from calibration.noise_waves import design_terms, source_temperature
-from calibration.radiometric_solver import solve_radiometric
-from calibration.reflection_noise import (
+from calibration.model.noise_waves import design_terms, source_temperature
+from calibration.model.reflection_noise import (
     receiver_temperature_variance,
     temperature_variance,
     trace_noise,
 )
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.radiometric_solver import solve_radiometric
 
 WIDTH = 8 * ITPM_CHANNEL_WIDTH_HZ  # 820 channels
 VNA_SIGMA = 1e-3

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from calibration.cli import main
-from calibration.hdf5_io import read_run, software_version, write_run
-from calibration.noise_floor import noise_floor
-from calibration.radiometric_solver import solve_radiometric
-from calibration.report import load_inputs, write_report
-from calibration.simulate import SimulationConfig, simulate_run
-from calibration.solution_file import read_solution, write_solution, write_solution_group
+from calibration.io.hdf5_io import read_run, software_version, write_run
+from calibration.io.solution_file import read_solution, write_solution, write_solution_group
+from calibration.model.simulate import SimulationConfig, simulate_run
+from calibration.report.writer import load_inputs, write_report
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import solve_radiometric
 
 CONFIG = SimulationConfig(
     channel_width_hz=400e3, calibrators=("cold", "hot", "r25", "r100", "c10open", "c10short")

@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 from scipy.signal import argrelmin
 
-from calibration import edges_text as et
-from calibration.figures import dicke_powers, evidence_landscape, noise_wave_parameters
-from calibration.figures.parameters import ranked_models, single_phase_frequencies
-from calibration.figures.run import NO_POWERS
-from calibration.hdf5_io import write_run
-from calibration.radiometric_solver import solve_radiometric
-from calibration.report import load_inputs, write_report
-from calibration.report_loo import same_procedure
-from calibration.simulate import SimulationConfig, simulate_run
-from calibration.solution_file import write_solution
-from calibration.validation import leave_one_out
+from calibration.checks.validation import leave_one_out
+from calibration.io import edges_text as et
+from calibration.io.hdf5_io import write_run
+from calibration.io.solution_file import write_solution
+from calibration.model.simulate import SimulationConfig, simulate_run
+from calibration.report.figures import dicke_powers, evidence_landscape, noise_wave_parameters
+from calibration.report.figures.parameters import ranked_models, single_phase_frequencies
+from calibration.report.figures.run import NO_POWERS
+from calibration.report.loo import same_procedure
+from calibration.report.writer import load_inputs, write_report
+from calibration.solve.radiometric_solver import solve_radiometric
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "edges3-2022-316"
 FOUR = ("cold", "hot", "c10open", "c10short")

@@ -1,4 +1,4 @@
-"""RFI flags (calibration.rfi): injected spikes and bursts found, clean channels left alone.
+"""RFI flags (calibration.checks.rfi): injected spikes and bursts found, clean channels left alone.
 
 Spikes are 1-3 channels wide at 8-100 sigma of the radiometer noise (log-uniform), on a
 REACH-like bandpass (a sky power law with a 0.5 % ripple of 10 MHz period); bursts last one
@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.errors import InvalidDataError
-from calibration.rfi import flag_dynamic_spectrum, flag_spectrum, robust_sigma
+from calibration.checks.rfi import flag_dynamic_spectrum, flag_spectrum, robust_sigma
+from calibration.core.errors import InvalidDataError
 
 SEEDS = range(6)
 AMPLITUDES = [(8.0, 12.0), (12.0, 30.0), (30.0, 100.0)]
@@ -161,8 +161,8 @@ def test_cable_sources_own_spectra_are_not_overflagged_and_their_spikes_are_foun
     flags expected in 12 x 3 x 6554 channels), and spikes injected into one cable source's
     own spectrum alone are all found."""
     from calibration import simulate_run
-    from calibration.rfi import calibrator_flags
-    from calibration.simulate import SimulationConfig
+    from calibration.checks.rfi import calibrator_flags
+    from calibration.model.simulate import SimulationConfig
 
     data = simulate_run(SimulationConfig(integration_s=integration_s), rng=seed).data
     flags, counts = calibrator_flags(data)

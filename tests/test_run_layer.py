@@ -13,7 +13,7 @@ import pytest
 from sites import planning_site
 
 from calibration.cli import main as reach_cal
-from calibration.solution_file import read_solution
+from calibration.io.solution_file import read_solution
 from reach_receiver.cli import run_main
 from reach_receiver.clock import ManualClock
 from reach_receiver.config.fields import Fields

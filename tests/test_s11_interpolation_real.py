@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration import edges_text as et
+from calibration.io import edges_text as et
 from reach_receiver.devices.vna import S11Measurement, SweepSettings
 from reach_receiver.store.handover import interpolate_s11
 from reach_receiver.store.touchstone import read_touchstone, write_touchstone

@@ -1,4 +1,4 @@
-"""Per-parameter prior scales set by the data (calibration.scale_fit)."""
+"""Per-parameter prior scales set by the data (calibration.choice.scale_fit)."""
 
 from __future__ import annotations
 
@@ -8,28 +8,32 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from calibration.averaging import mixture_posterior, select_components, with_smooth_hypothesis
-from calibration.basis import PolynomialBasis
-from calibration.conjugate import ScalePrior, solve
-from calibration.model_fit import OrderChoice, _hypotheses_with_own_widths
-from calibration.noise_waves import PARAMETERS
-from calibration.normal_equations import build_normal_equations
-from calibration.parameter_scales import (
+from calibration.choice.averaging import (
+    mixture_posterior,
+    select_components,
+    with_smooth_hypothesis,
+)
+from calibration.choice.model_fit import OrderChoice, _hypotheses_with_own_widths
+from calibration.choice.parameter_scales import (
     evidence_gradient,
     maximise,
     maximise_each,
     width_log_prior,
 )
-from calibration.radiometric_solver import RadiometricPrior, linearise, solve_radiometric
-from calibration.scale_fit import (
+from calibration.choice.scale_fit import (
     ParameterScales,
     fit_largest,
     fit_scales,
     log_occam,
     width_scale,
 )
-from calibration.shrinkage import ShrinkagePrior, log_scale_density
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.basis import PolynomialBasis
+from calibration.model.noise_waves import PARAMETERS
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.regression.conjugate import ScalePrior, solve
+from calibration.regression.normal_equations import build_normal_equations
+from calibration.regression.shrinkage import ShrinkagePrior, log_scale_density
+from calibration.solve.radiometric_solver import RadiometricPrior, linearise, solve_radiometric
 
 LEVELS = {"unc": 250.0, "cos": 190.0, "sin": 90.0, "NS": 1116.0, "L": 300.0}
 

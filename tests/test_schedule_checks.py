@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from calibration import OrderChoice, solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 from reach_receiver.run.checks import compare_test_load, compare_with_benchmark, rfi_flags
 
 FREQ = np.linspace(40e6, 180e6, 1401)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from benchmarks.sim_corrections import SCHEDULE, engine_once
-from calibration.simulate import REACH_CALIBRATORS
+from calibration.model.simulate import REACH_CALIBRATORS
 from reach_receiver.run.session import RunSession
 from reach_receiver.sim.effects import SimEffects
 from reach_receiver.sim.physics import PhysicsConfig

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from calibration.noise_waves import design_terms, model_q
+from calibration.model.noise_waves import design_terms, model_q
 from reach_receiver.clock import ManualClock
 from reach_receiver.frontend.layout import REACH_SOURCES, VNA_STANDARDS
 from reach_receiver.frontend.paths import FrontEnd

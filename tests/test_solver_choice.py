@@ -1,7 +1,7 @@
 """The solver as an option wherever a calibration is made (issue 14, item 6).
 
 ``reach-cal solve / apply / summary / report / validate`` with every method of
-:data:`calibration.solvers.METHODS` on seeded simulated runs (REACH's band at 16 iTPM
+:data:`calibration.solve.solvers.METHODS` on seeded simulated runs (REACH's band at 16 iTPM
 channels per channel: 410 channels, so a solve takes at most a few tenths of a second);
 per-channel solution files round-trip exactly; a bad solver in a schedule or a site file
 is refused at its file and line; and a short simulated run through the real schedule path
@@ -21,14 +21,14 @@ from scipy import stats
 from sites import DEVICES, planning_site
 
 from calibration.cli import main as reach_cal
-from calibration.errors import FileFormatError, InvalidDataError
-from calibration.hdf5_io import read_run, read_truth
-from calibration.noise_waves import design_terms, source_temperature
-from calibration.per_frequency import ChannelSolution
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
-from calibration.solution import Solution
-from calibration.solution_file import read_solution, write_solution
-from calibration.solvers import (
+from calibration.core.errors import FileFormatError, InvalidDataError
+from calibration.io.hdf5_io import read_run, read_truth
+from calibration.io.solution_file import read_solution, write_solution
+from calibration.model.noise_waves import design_terms, source_temperature
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.per_frequency import ChannelSolution
+from calibration.solve.solution import Solution
+from calibration.solve.solvers import (
     METHODS,
     PER_CHANNEL_METHODS,
     POLYNOMIAL_METHODS,

@@ -3,18 +3,18 @@
 Calibrators spanning ~2 K (the hot load left out, each unheated load within 1 K of the
 room) at full resolution: two Gauss-Newton steps left the error 2-14x the noise floor with
 nothing said (``benchmarks/calibrator_subsets.py``); the iteration to the criterion of
-:mod:`calibration.convergence` brings it to the floor.
+:mod:`calibration.solve.convergence` brings it to the floor.
 """
 
 import numpy as np
 import pytest
 
 from benchmarks.calibrator_subsets import SpreadConfig, draw_run
-from calibration.convergence import TOLERANCE
-from calibration.identifiability import UndeterminedError
-from calibration.noise_floor import noise_floor
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import REACH_CALIBRATORS, SimulatedRun, simulate_run
+from calibration.model.simulate import REACH_CALIBRATORS, SimulatedRun, simulate_run
+from calibration.solve.convergence import TOLERANCE
+from calibration.solve.identifiability import UndeterminedError
+from calibration.solve.noise_floor import noise_floor
+from calibration.solve.radiometric_solver import solve_radiometric
 
 
 def _without_hot(size: int, rng: np.random.Generator) -> SimulatedRun:

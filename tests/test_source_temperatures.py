@@ -12,18 +12,18 @@ import pytest
 import skrf
 from skrf.media import DefinedGammaZ0
 
-from calibration.coax import DataSheetCoax, PhysicalCoax, line_s_parameters
-from calibration.edges_text import UT141C, coax_power_gain
-from calibration.errors import InvalidDataError
-from calibration.reflections import Cable, terminated_cable
-from calibration.source_temperatures import (
+from calibration.core.errors import InvalidDataError
+from calibration.io.edges_text import UT141C, coax_power_gain
+from calibration.model.reflections import Cable, terminated_cable
+from calibration.model.source_temperatures import (
     antenna_loss_correction,
     available_gain,
     cable_source_temperature,
     split_cable_temperature,
     terminating_load_temperature,
 )
-from calibration.two_port import deembed_reflection, embed_reflection
+from calibration.rf.coax import DataSheetCoax, PhysicalCoax, line_s_parameters
+from calibration.rf.two_port import deembed_reflection, embed_reflection
 
 SEEDS = range(30)
 FREQ = np.linspace(50e6, 200e6, 61)

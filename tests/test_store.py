@@ -9,11 +9,11 @@ import h5py
 import numpy as np
 import pytest
 
-from calibration.hdf5_io import read_run
-from calibration.model_fit import OrderChoice
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulatedRun, simulate_run
-from calibration.solution_file import read_solution_group
-from calibration.thesis_solver import solve_thesis
+from calibration.choice.model_fit import OrderChoice
+from calibration.io.hdf5_io import read_run
+from calibration.io.solution_file import read_solution_group
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulatedRun, simulate_run
+from calibration.solve.thesis_solver import solve_thesis
 from reach_receiver.store import (
     DICKE_POSITIONS,
     RunStore,
@@ -131,7 +131,7 @@ def test_engine_reads_the_merged_run(run_dir, sim):
 
 def test_a_receiver_run_names_its_noise_diode_for_the_engine(run_dir):
     """REACH's NC346A is named in the run, so the engine's ENR check runs on it (only)."""
-    from calibration.hdf5_io import NC346A, run_noise_source_model
+    from calibration.io.hdf5_io import NC346A, run_noise_source_model
 
     assert run_noise_source_model(run_dir / "run.h5") == NC346A
 

@@ -7,9 +7,9 @@ import pytest
 from scipy import stats
 
 from calibration import OrderChoice, solve_radiometric
-from calibration.noise_floor import noise_floor
-from calibration.normal_equations import build_normal_equations
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.regression.normal_equations import build_normal_equations
+from calibration.solve.noise_floor import noise_floor
 
 
 @pytest.mark.parametrize("orders", [(2, 1, 2, 1, 2), (3, 0, 4, 1, 2), (1, 1, 1, 1, 1)])
@@ -87,8 +87,8 @@ def test_ignoring_it_makes_the_posterior_overconfident():
 
 
 def test_uncertainty_is_checked_and_survives_the_run_file(tmp_path):
-    from calibration.errors import InvalidDataError
-    from calibration.hdf5_io import read_run, write_run
+    from calibration.core.errors import InvalidDataError
+    from calibration.io.hdf5_io import read_run, write_run
 
     _, data = offset_run(0, SIGMA_K)
     write_run(tmp_path / "run.h5", data)

@@ -13,12 +13,12 @@ import itertools
 import numpy as np
 import pytest
 
-from calibration.averaging import MixturePosterior
-from calibration.conjugate import CoefficientPrior, ScalePrior, TermPrior, solve
-from calibration.model_fit import OrderChoice, fit
-from calibration.noise_waves import PARAMETERS
-from calibration.radiometric_solver import RadiometricPrior, solve_radiometric
-from calibration.simulate import SimulationConfig, simulate_run
+from calibration.choice.averaging import MixturePosterior
+from calibration.choice.model_fit import OrderChoice, fit
+from calibration.model.noise_waves import PARAMETERS
+from calibration.model.simulate import SimulationConfig, simulate_run
+from calibration.regression.conjugate import CoefficientPrior, ScalePrior, TermPrior, solve
+from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
 from tests.test_model_choice import COARSE, normal_equations_of
 
 

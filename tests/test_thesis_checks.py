@@ -13,7 +13,7 @@ from simulations import (
 )
 
 from calibration import OrderChoice, solve_thesis
-from calibration.noise_waves import INDEX
+from calibration.model.noise_waves import INDEX
 
 CONSTANT = OrderChoice.fixed((1, 1, 1, 1, 1))
 

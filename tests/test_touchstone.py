@@ -19,8 +19,8 @@ import pytest
 import skrf
 from touchstone_variants import DATA_ROOT, Variant, make_variant
 
-from calibration import edges_text as et
-from calibration import touchstone as ts
+from calibration.io import edges_text as et
+from calibration.rf import touchstone as ts
 from reach_receiver.store import touchstone as store_touchstone
 
 RTOL = 1e-12

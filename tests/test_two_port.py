@@ -7,8 +7,8 @@ import pytest
 import skrf
 from skrf.network import s2t as skrf_s2t
 
-from calibration.errors import InvalidDataError
-from calibration.two_port import (
+from calibration.core.errors import InvalidDataError
+from calibration.rf.two_port import (
     cascade,
     check_port_order,
     check_two_port,

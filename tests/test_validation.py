@@ -1,4 +1,4 @@
-"""Leave-one-out validation (``calibration.validation``, ``reach-cal validate``).
+"""Leave-one-out validation (``calibration.checks.validation``, ``reach-cal validate``).
 
 Simulated four-load runs with the EDGES set of calibrators (REACH names: ``cold`` the
 ambient load, ``hot``, ``c10open``, ``c10short``), 24 seeds, 103 channels each. Held out,
@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration import edges_text as et
+from calibration.checks.validation import leave_one_out
 from calibration.cli import main
-from calibration.hdf5_io import write_run
-from calibration.radiometric_solver import solve_radiometric
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
-from calibration.validation import leave_one_out
+from calibration.io import edges_text as et
+from calibration.io.hdf5_io import write_run
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
+from calibration.solve.radiometric_solver import solve_radiometric
 
 EDGES_SET = ("cold", "hot", "c10open", "c10short")
 CFG = SimulationConfig(channel_width_hz=64 * ITPM_CHANNEL_WIDTH_HZ, calibrators=EDGES_SET)

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from calibration.cal_kit import CalKit, OpenStandard
+from calibration.rf.cal_kit import CalKit, OpenStandard
 from reach_receiver.clock import ManualClock
 from reach_receiver.devices.vna import S11Measurement, ScpiErrorEntry, SweepSettings, Vna
 from reach_receiver.devices.vna_host_cal import (

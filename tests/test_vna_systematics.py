@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 
 from calibration import simulate_run, solve_radiometric
-from calibration.errors import InvalidDataError
-from calibration.measurement_uncertainty import VnaAccuracy, sample_reflections
-from calibration.model_fit import OrderChoice
-from calibration.per_frequency import solve_least_squares_per_channel
-from calibration.simulate import SimulationConfig
-from calibration.solvers import refit
-from calibration.thesis_solver import solve_thesis
-from calibration.vna_systematics import reflection_systematics
+from calibration.checks.vna_systematics import reflection_systematics
+from calibration.choice.model_fit import OrderChoice
+from calibration.core.errors import InvalidDataError
+from calibration.model.measurement_uncertainty import VnaAccuracy, sample_reflections
+from calibration.model.simulate import SimulationConfig
+from calibration.solve.per_frequency import solve_least_squares_per_channel
+from calibration.solve.solvers import refit
+from calibration.solve.thesis_solver import solve_thesis
 
 EIGHT = ("cold", "hot", "r25", "r100", "c2r27", "c2r69", "c10open", "c10r250")
 

@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..data import CalibrationData, SourceData
-from ..errors import InvalidDataError
-from ..hdf5_io import read_run
-from ..identifiability import model_choice_line
-from ..solution import CalibratedSpectrum, check_grid
-from ..solution_file import read_solution, write_calibrated
-from ..solvers import AnySolution, band_hz, refit
-from ..vna_systematics import reflection_systematics
+from ..checks.vna_systematics import reflection_systematics
+from ..core.errors import InvalidDataError
+from ..io.hdf5_io import read_run
+from ..io.solution_file import read_solution, write_calibrated
+from ..model.data import CalibrationData, SourceData
+from ..solve.identifiability import model_choice_line
+from ..solve.solution import CalibratedSpectrum, check_grid
+from ..solve.solvers import AnySolution, band_hz, refit
 from .files import check_outputs
 
 

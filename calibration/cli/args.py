@@ -2,7 +2,7 @@
 
 Every command's parser is built from these, so that ``solve`` and ``validate`` read
 ``--method``, ``--orders`` and ``--max-orders`` the same way, and every band is ``LO,HI``
-in MHz. This module imports only :mod:`argparse` and :mod:`calibration.constants`: a
+in MHz. This module imports only :mod:`argparse` and :mod:`calibration.core.constants`: a
 parser is built (and ``--help`` printed) before any of the engine is imported; a
 command's module is imported by name when it runs (:func:`add_command`).
 """
@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from ..constants import (
+from ..core.constants import (
     CELSIUS_SLIP_K,
     DEFAULT_ALPHA,
     METHODS,
@@ -42,7 +42,7 @@ ORDER_NAMES = ", ".join(PARAMETER_NAMES)
 #: The most terms one parameter's polynomial may have: the order search's own ceiling,
 #: beyond which its Legendre terms only fit noise (and the normal equations grow as n^2).
 MAX_ORDER = ORDER_CEILING
-#: The automatic order box: its start and its step (``calibration.model_fit.OrderChoice``;
+#: The automatic order box: its start and its step (``calibration.choice.model_fit.OrderChoice``;
 #: held equal by a test, since this module must not import the engine).
 AUTO_BOX_START, AUTO_BOX_STEP = 8, 4
 Orders = tuple[int, int, int, int, int]
@@ -227,7 +227,7 @@ def add_solver_options(parser: argparse.ArgumentParser) -> None:
         "--method",
         choices=METHODS,
         default="radiometric",
-        help="noise-wave solver (calibration.solvers): polynomial radiometric (default) or "
+        help="noise-wave solver (calibration.solve.solvers): polynomial radiometric (default) or "
         "thesis, or per channel least-squares (thesis 4.7) or bayesian (4.8), which need "
         ">= 5 calibrators",
     )

@@ -8,19 +8,19 @@
 
 In this order, before the solve: ``--band`` keeps the channels in ``LO-HI`` MHz;
 ``--mask-band`` drops those in a band of known interference (repeatable;
-:func:`calibration.preparation.excision_flags`); ``--rfi`` flags spikes in each
-calibrator's three Dicke spectra (:func:`calibration.rfi.calibrator_flags`, 5 sigma) and
+:func:`calibration.checks.preparation.excision_flags`); ``--rfi`` flags spikes in each
+calibrator's three Dicke spectra (:func:`calibration.checks.rfi.calibrator_flags`, 5 sigma) and
 drops the channels flagged in any of them from every calibrator, saying how many per source;
 ``--smooth-s11 P`` replaces every reflection (calibrators' and the receiver's) by the
-smoothing spline of factor ``P`` (:func:`calibration.preparation.smooth_reflection`,
+smoothing spline of factor ``P`` (:func:`calibration.checks.preparation.smooth_reflection`,
 frequency in MHz; its kernel width is printed). What was dropped is counted in the
 solution's metadata. Then ``--check-consistency`` holds each calibrator out and tests it
-against the others (:mod:`calibration.consistency`), and ``--exclude-inconsistent N``
+against the others (:mod:`calibration.checks.consistency`), and ``--exclude-inconsistent N``
 also excludes the calibrator it names and checks again, at most ``N`` times (default 2),
 and solves without them. After the solve, :func:`noise_source_line` holds the fitted
-``T_NS`` to the noise diode's ENR table (:func:`calibration.measurement_uncertainty.
+``T_NS`` to the noise diode's ENR table (:func:`calibration.model.measurement_uncertainty.
 check_noise_source`): PASS or FAIL, also in ``reach-cal summary``; only for a run whose
-root attribute ``noise_source_model`` is ``"NC346A"`` (:mod:`calibration.hdf5_io`), the
+root attribute ``noise_source_model`` is ``"NC346A"`` (:mod:`calibration.io.hdf5_io`), the
 diode the table describes; other runs (EDGES imports) get one line saying why not.
 """
 
@@ -34,16 +34,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..consistency import check_consistency, exclude_inconsistent
-from ..data import CalibrationData
-from ..errors import CalibrationError
-from ..hdf5_io import NC346A, run_noise_source_model
-from ..measurement_uncertainty import check_noise_source
-from ..noise_waves import INDEX
-from ..preparation import excision_flags, smooth_reflection, smoothing_width_hz
-from ..rfi import calibrator_flags
-from ..simulate import NC346A_ENR_DB
-from ..solvers import AnySolution, band_hz
+from ..checks.consistency import check_consistency, exclude_inconsistent
+from ..checks.preparation import excision_flags, smooth_reflection, smoothing_width_hz
+from ..checks.rfi import calibrator_flags
+from ..core.errors import CalibrationError
+from ..io.hdf5_io import NC346A, run_noise_source_model
+from ..model.data import CalibrationData
+from ..model.measurement_uncertainty import check_noise_source
+from ..model.noise_waves import INDEX
+from ..model.simulate import NC346A_ENR_DB
+from ..solve.solvers import AnySolution, band_hz
 
 __all__ = [
     "corrected_solve",

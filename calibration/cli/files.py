@@ -13,7 +13,7 @@ Every command that writes a file checks its outputs before any work (:func:`chec
   replaces an HDF5 file; a directory output must not be an existing file;
 * two outputs of one command may not be the same file.
 
-A refusal is an :class:`~calibration.errors.InvalidDataError` naming the option, the
+A refusal is an :class:`~calibration.core.errors.InvalidDataError` naming the option, the
 path and why; nothing has been written.
 """
 
@@ -27,15 +27,15 @@ from typing import Literal
 
 import h5py
 
-from ..errors import InvalidDataError
-from ..hdf5_io import RUN_FORMATS
+from ..core.errors import InvalidDataError
+from ..io.hdf5_io import RUN_FORMATS
 
 __all__ = ["OutputKind", "check_outputs", "same_file"]
 
 #: What an output is: an HDF5 file of a ``format``, text, or a directory of files.
 OutputKind = Literal["run", "solution", "calibrated", "text", "directory"]
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-#: ``format`` attribute of each HDF5 kind (:mod:`calibration.hdf5_io`).
+#: ``format`` attribute of each HDF5 kind (:mod:`calibration.io.hdf5_io`).
 FORMATS = {
     "run": "reach-calibration-run",
     "solution": "reach-calibration-solution",

@@ -17,16 +17,16 @@
     VNA options: [--kit KIT.json] [--device '{name}.s1p']
                  [--standards short=P,open=P,load=P] [--standards-for NAME:short=P,...]
 
-``import edges`` reads an EDGES text run (:mod:`calibration.edges_import`) and writes it with
-:func:`calibration.hdf5_io.write_run`, so ``solve``, ``apply``, ``summary`` and ``validate``
+``import edges`` reads an EDGES text run (:mod:`calibration.io.edges_import`) and writes it with
+:func:`calibration.io.hdf5_io.write_run`, so ``solve``, ``apply``, ``summary`` and ``validate``
 read it. With ``--vna`` its S11s are the raw VNA exports of every load and the receiver,
-corrected with their standards (:mod:`calibration.vna_import`). ``import vna`` writes those
+corrected with their standards (:mod:`calibration.io.vna_import`). ``import vna`` writes those
 corrected reflections as ``OUT_DIR/{name}.s1p``. A receiver with standards of its own is
-read at another plane than the loads: its path to theirs (:mod:`calibration.receiver_path`)
+read at another plane than the loads: its path to theirs (:mod:`calibration.io.receiver_path`)
 must be given, or the planes said to coincide (``--receiver-path none``), else the import is
 refused. A load below 150 K is refused as a likely Celsius value unless ``--cryogenic``.
 The run file's root attribute ``power_spectra = "placeholder"`` marks its powers as
-stand-ins (:mod:`calibration.hdf5_io`). Patterns take ``{name}`` and shell wildcards,
+stand-ins (:mod:`calibration.io.hdf5_io`). Patterns take ``{name}`` and shell wildcards,
 relative to the directory read; each must match one file. Bad input is reported as
 ``file:line: message`` (or ``file: message``), exit status 2.
 """
@@ -38,8 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cal_kit import IDEAL_KIT, CalKit
-from ..edges_import import (
+from ..checks.temperature_sanity import celsius_message, celsius_slips
+from ..core.errors import InvalidDataError
+from ..io.edges_import import (
     CableLoss,
     EdgesImport,
     EdgesLayout,
@@ -48,18 +49,17 @@ from ..edges_import import (
     import_edges,
     read_gain_table,
 )
-from ..edges_text import UT141C
-from ..errors import InvalidDataError
-from ..hdf5_io import PLACEHOLDER_POWERS, write_run
-from ..receiver_path import (
+from ..io.edges_text import UT141C
+from ..io.hdf5_io import PLACEHOLDER_POWERS, write_run
+from ..io.receiver_path import (
     EDGES3_RECEIVER_CABLE,
     ReceiverCable,
     ReceiverPath,
     read_measured_path,
 )
-from ..temperature_sanity import celsius_message, celsius_slips
-from ..touchstone import write_touchstone
-from ..vna_import import VnaLayout, check_receiver_plane, correct_exports, read_cal_kit
+from ..io.vna_import import VnaLayout, check_receiver_plane, correct_exports, read_cal_kit
+from ..rf.cal_kit import IDEAL_KIT, CalKit
+from ..rf.touchstone import write_touchstone
 from .files import check_outputs, same_file
 
 __all__ = ["cmd_import_edges", "cmd_import_vna"]

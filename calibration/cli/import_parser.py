@@ -2,7 +2,7 @@
 
 Light (argparse only), like every ``reach-cal`` parser; the commands are in
 :mod:`calibration.cli.import_commands`. Defaults that the engine's importer holds
-(:class:`calibration.edges_import.EdgesLayout`) are left ``None`` here and filled in there.
+(:class:`calibration.io.edges_import.EdgesLayout`) are left ``None`` here and filled in there.
 """
 
 from __future__ import annotations
@@ -12,20 +12,20 @@ import math
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from ..constants import CELSIUS_SLIP_K
-from ..kit_format import KIT_FORMAT
+from ..core.constants import CELSIUS_SLIP_K
+from ..rf.kit_format import KIT_FORMAT
 from .args import add_command, band_arg, names_arg, number_arg, output_arg, positive_float
 
 __all__ = ["add_import_command"]
 
-#: The short-open-load standards (:data:`calibration.cal_kit.STANDARD_NAMES`).
+#: The short-open-load standards (:data:`calibration.rf.cal_kit.STANDARD_NAMES`).
 STANDARD_NAMES = ("short", "open", "load")
 #: ``--integration-s``'s default: fastspec's accumulation, 2^31 samples at 400 MSPS
-#: (:data:`calibration.edges_text.INTEGRATION_PER_POSITION_S`).
+#: (:data:`calibration.io.edges_text.INTEGRATION_PER_POSITION_S`).
 INTEGRATION_PER_POSITION_S = 2.0**31 / 400e6
-#: ``--receiver-cable``'s fields (:class:`calibration.receiver_path.ReceiverCable`).
+#: ``--receiver-cable``'s fields (:class:`calibration.io.receiver_path.ReceiverCable`).
 RECEIVER_CABLE_FIELDS = ("length_m", "eps_pct", "sigma_pct")
-#: ``--hot-cable``'s fields (:data:`calibration.edges_text.UT141C`), SI units.
+#: ``--hot-cable``'s fields (:data:`calibration.io.edges_text.UT141C`), SI units.
 HOT_CABLE_FIELDS = "a, b (radii, m), eps_r, sigma_in, sigma_out (S/m), tan_d, length (m)"
 DEFAULT_BAND = (50.0, 190.0)
 

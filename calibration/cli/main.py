@@ -16,7 +16,7 @@
     reach-cal validate RUN.h5 --leave-one-out [...]
     reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
 
-Files are those of :mod:`calibration.hdf5_io`. No command writes over one of its inputs or
+Files are those of :mod:`calibration.io.hdf5_io`. No command writes over one of its inputs or
 a file holding measurements (:mod:`calibration.cli.files`); every numeric option is
 range-checked as it is parsed (:func:`calibration.cli.args.number_arg`); ``apply`` refuses
 a run on another channel grid than its solution's. Errors an operator can act on (unreadable or
@@ -39,8 +39,8 @@ import os
 import sys
 from collections.abc import Sequence
 
-from ..constants import DEFAULT_CORRELATION_HZ, ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
-from ..errors import CalibrationError, IllPosedError
+from ..core.constants import DEFAULT_CORRELATION_HZ, ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
+from ..core.errors import CalibrationError, IllPosedError
 from .args import (
     add_command,
     add_correction_options,

@@ -5,14 +5,14 @@
     reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
 
 ``SOLUTION.h5`` is a solution file or a receiver's run file (its latest solution, and the
-run itself unless ``--run`` names another). :mod:`calibration.report` says what is written.
+run itself unless ``--run`` names another). :mod:`calibration.report.writer` says what is written.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from ..report import write_report
+from ..report.writer import write_report
 from .files import check_outputs
 
 __all__ = ["cmd_report"]

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import InvalidDataError
-from ..hdf5_io import NC346A, write_run
-from ..simulate import REACH_CALIBRATORS, SimulationConfig, simulate_run
+from ..core.errors import InvalidDataError
+from ..io.hdf5_io import NC346A, write_run
+from ..model.simulate import REACH_CALIBRATORS, SimulationConfig, simulate_run
 from .files import check_outputs
 
 #: The most channels ``simulate`` makes: the iTPM's 32768 over its whole band, twice.

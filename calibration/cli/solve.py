@@ -9,18 +9,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..data import CalibrationData
-from ..errors import InvalidDataError
-from ..hdf5_io import read_run
-from ..identifiability import caution_lines
-from ..model_fit import OrderChoice
-from ..model_used import model_used_line, warning_lines
-from ..noise_waves import PARAMETERS
-from ..per_frequency import ChannelSolution
-from ..solution import Solution, grid_metadata
-from ..solution_file import write_solution
-from ..solvers import AnySolution, method_name, solver
-from ..temperature_sanity import check_temperatures
+from ..checks.temperature_sanity import check_temperatures
+from ..choice.model_fit import OrderChoice
+from ..core.errors import InvalidDataError
+from ..io.hdf5_io import read_run
+from ..io.solution_file import write_solution
+from ..model.data import CalibrationData
+from ..model.noise_waves import PARAMETERS
+from ..report.model_used import model_used_line, warning_lines
+from ..solve.identifiability import caution_lines
+from ..solve.per_frequency import ChannelSolution
+from ..solve.solution import Solution, grid_metadata
+from ..solve.solvers import AnySolution, method_name, solver
 from .args import ORDER_NAMES
 from .corrections import corrected_solve, noise_source_line
 from .files import check_outputs
@@ -30,7 +30,7 @@ def solver_from_args(args: argparse.Namespace) -> Callable[[CalibrationData], An
     """The solve that :func:`~calibration.cli.args.add_solver_options`'s options ask for.
 
     Orders, order limits or a basis with a per-channel ``--method`` are refused
-    (:func:`calibration.solvers.solver`).
+    (:func:`calibration.solve.solvers.solver`).
     """
     choice = None
     if args.orders is not None:

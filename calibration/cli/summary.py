@@ -6,16 +6,16 @@ import argparse
 
 import numpy as np
 
-from ..data import CalibrationData, SourceData
-from ..hdf5_io import read_run, read_truth
-from ..identifiability import caution_lines
-from ..model_used import distance_line, model_used_line, warning_lines
-from ..noise_waves import PARAMETERS, design_terms, source_temperature
-from ..per_frequency import ChannelSolution
-from ..polynomial_model import coefficient_slices
-from ..solution import check_grid
-from ..solution_file import read_solution
-from ..solvers import AnySolution, method_name, solution_noise_floor
+from ..io.hdf5_io import read_run, read_truth
+from ..io.solution_file import read_solution
+from ..model.data import CalibrationData, SourceData
+from ..model.noise_waves import PARAMETERS, design_terms, source_temperature
+from ..model.polynomial_model import coefficient_slices
+from ..report.model_used import distance_line, model_used_line, warning_lines
+from ..solve.identifiability import caution_lines
+from ..solve.per_frequency import ChannelSolution
+from ..solve.solution import check_grid
+from ..solve.solvers import AnySolution, method_name, solution_noise_floor
 from .apply import _check_band, calibrate_source, mk, rms
 from .args import ORDER_NAMES
 from .corrections import noise_source_line

@@ -7,7 +7,7 @@
                        [-o REPORT.json | REPORT.csv]
 
 Each calibrator is left out of the solve in turn and calibrated with the others' solution
-(:mod:`calibration.validation`); the table gives its RMS actual error, the RMS predicted
+(:mod:`calibration.checks.validation`); the table gives its RMS actual error, the RMS predicted
 error (calibration part, and the full predictive), their ratio and the fractions of
 channels inside the 68% / 95% intervals, or ``refused: <message>``.
 """
@@ -21,11 +21,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..atomic_file import write_atomically
-from ..errors import CalibrationError, InvalidDataError
-from ..model_used import warning_lines
-from ..solution import Solution
-from ..validation import HeldOut, LeaveOneOutReport, leave_one_out
+from ..checks.validation import HeldOut, LeaveOneOutReport, leave_one_out
+from ..core.atomic_file import write_atomically
+from ..core.errors import CalibrationError, InvalidDataError
+from ..report.model_used import warning_lines
+from ..solve.solution import Solution
 from .files import check_outputs
 from .solve import calibrators_of, noise_line, solver_from_args
 

@@ -4,7 +4,7 @@ Keys of the site's ``calibration`` section beside ``band_hz`` (issue 14, item 6)
 
     calibration:
       band_hz: [50.0e+6, 130.0e+6]
-      solver: radiometric      # the calibrate step's default (site.py, calibration.solvers)
+      solver: radiometric      # the calibrate step's default (site.py, calibration.solve.solvers)
       mts: {sources: mts_j1_j2.s2p, lna: mts_j2_j4.s2p}   # two-ports, port 1 at the device
       cables:                  # sources with a cable at its own temperature (eqs. 4.8-4.9)
         hot: {length_m: 0.3, velocity_factor: 0.83, loss_db_per_m: 0.1, thermocouple: 1}
@@ -16,7 +16,7 @@ source's S11, eq. 4.6), ``mts.lna`` the path between the LNA (port 1) and the so
 (embedded onto the LNA's S11, eq. 4.7). A cable is a measured two-port (``s2p``, port 1
 at the termination) or a data-sheet coax (``length_m``, ``velocity_factor``,
 ``loss_db_per_m`` at ``ref_freq_hz``, default 100 MHz, scaled by ``(f/f_ref)^
-loss_exponent``, default 0.5: :class:`calibration.coax.DataSheetCoax`); ``thermocouple``
+loss_exponent``, default 0.5: :class:`calibration.rf.coax.DataSheetCoax`); ``thermocouple``
 is the TC-08 port on the cable, the termination's being the source's own (the site's
 ``thermocouples``). Relative file names are taken from the site file's directory.
 
@@ -98,7 +98,7 @@ def touchstone_problem(path: Path, ports: int) -> str | None:
         )
     # Imported here: numpy is a fifth of a second, which a site file without corrections
     # (every reach-run status) need not pay.
-    from calibration.touchstone import read_touchstone_network
+    from calibration.rf.touchstone import read_touchstone_network
 
     try:
         network = read_touchstone_network(path)

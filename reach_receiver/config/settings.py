@@ -21,7 +21,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal, TypeVar
 
-from calibration.constants import ITPM_CHANNEL_WIDTH_HZ
+from calibration.core.constants import ITPM_CHANNEL_WIDTH_HZ
 
 from .fields import REQUIRED, Fields
 

@@ -12,7 +12,7 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
       spectrometer: {host: 192.168.10.1, port: 4660, source: 192.168.10.30, period_s: 1.0}
                                       # period_s required; source: the iTPM's address
     calibration: {band_hz: [50.0e+6, 130.0e+6], solver: radiometric}   # the engine's band
-                                  # and solver (the defaults; calibration.solvers.METHODS);
+                                  # and solver (the defaults; calibration.solve.solvers.METHODS);
                                   # corrections: reach_receiver.config.corrections
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
@@ -37,7 +37,7 @@ from typing import Any
 
 import yaml
 
-from calibration.constants import METHODS
+from calibration.core.constants import METHODS
 from reach_receiver.clock import Clock, CompressedClock, SystemClock
 from reach_receiver.frontend.layout import (
     REACH_SOURCES,
@@ -84,7 +84,7 @@ class SiteConfig:
 
     ``sources`` is table A.2 with the site's changes, ``thermocouples`` table 2.2 with
     its changes; ``simulation`` holds a ``reach-sim``'s shared clock (empty on site);
-    ``solver`` the ``calibrate`` step's default solver (:data:`calibration.solvers.METHODS`).
+    ``solver`` the ``calibrate`` step's default solver (:data:`calibration.solve.solvers.METHODS`).
     """
 
     devices: DeviceSettings

@@ -4,7 +4,7 @@ A write that fails (a full disk) keeps the previous file and says so once
 (:func:`write_state`); the caller keeps its state in memory and writes again later.
 
 
-They are written atomically (:func:`calibration.atomic_file.write_atomically`), so a
+They are written atomically (:func:`calibration.core.atomic_file.write_atomically`), so a
 crash leaves either the old file or the new one; but a disk fault, a hand edit or a copy
 from elsewhere can still leave one that does not read. A daemon that refused to start
 over it would leave the front-end to a restart loop, so an unreadable file is moved
@@ -22,7 +22,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TypeVar
 
-from calibration.atomic_file import write_atomically
+from calibration.core.atomic_file import write_atomically
 
 log = logging.getLogger(__name__)
 

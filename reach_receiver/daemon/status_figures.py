@@ -1,7 +1,7 @@
 """The status page's figures, from what the daemon has stored (read-only).
 
 Each builder returns a :class:`matplotlib.figure.Figure` in the engine's style
-(:mod:`calibration.figures.style`, Agg, no pyplot) and says so in the figure when it has
+(:mod:`calibration.report.figures.style`, Agg, no pyplot) and says so in the figure when it has
 nothing to show yet:
 
 * :func:`dicke_spectra`: the latest Dicke cycle of the newest run that has one (a running
@@ -9,12 +9,12 @@ nothing to show yet:
   its three positions' spectra (the receiver's input, in dB of the spectrometer's
   arbitrary unit) and their ``Q`` (thesis eq. 3.9) over the run's band;
 * :func:`s11s`: the latest S11 of every target in the newest run with S11s, on a Smith
-  chart and in dB (the chart of :func:`calibration.figures.reflections`);
+  chart and in dB (the chart of :func:`calibration.report.figures.reflections`);
 * :func:`temperatures_last_day`: every temperature series of the metrics database
   (:meth:`~reach_receiver.monitor.database.MetricsDatabase.series`) over the last day,
-  drawn by :func:`calibration.figures.temperatures`;
+  drawn by :func:`calibration.report.figures.temperatures`;
 * :func:`current_solution`: the newest run's latest ``/calibration/solution`` drawn by
-  :func:`calibration.figures.noise_wave_parameters`.
+  :func:`calibration.report.figures.noise_wave_parameters`.
 """
 
 from __future__ import annotations
@@ -27,9 +27,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from calibration.figures import noise_wave_parameters
-from calibration.figures.reflections import SMITH_SPACE, smith_grid
-from calibration.figures.style import (
+from calibration.model.noise_waves import q_from_powers
+from calibration.report.figures import noise_wave_parameters
+from calibration.report.figures.reflections import SMITH_SPACE, smith_grid
+from calibration.report.figures.style import (
     NEUTRAL,
     WIDTH_PX,
     Space,
@@ -43,7 +44,6 @@ from calibration.figures.style import (
     styled,
     suptitle,
 )
-from calibration.noise_waves import q_from_powers
 from reach_receiver.config.monitoring import AlarmRule
 from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor.database import MetricsDatabase

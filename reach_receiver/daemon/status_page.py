@@ -314,7 +314,7 @@ class StatusPage:
         return self._figures.data_version(name, self.runs, self.database())
 
     def _render(self, name: str) -> tuple[str, bytes]:
-        from calibration.figures.style import DPI
+        from calibration.report.figures.style import DPI
 
         fig = self._builders[name](self.runs, self.database(), self.now(), self.rules)
         return smallest_image(fig, DPI)

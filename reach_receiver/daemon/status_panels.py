@@ -5,7 +5,7 @@ the Teensy's sensors, the TEC), a line per sensor, over the last day, on a time 
 ``HH:MM`` UTC (the operator's log and the alarms speak UTC). Each enabled alarm rule on
 the metric is a dashed horizontal line at its threshold, named, so a reading's distance
 to its alarm is seen at a glance. Lines are reduced to the figure's pixel width first
-(:func:`calibration.figures.style.envelope`): a day of minute data would otherwise make
+(:func:`calibration.report.figures.style.envelope`): a day of minute data would otherwise make
 a large SVG of points no screen can show.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.dates import DateFormatter, date2num
 from matplotlib.figure import Figure
 
-from calibration.figures.style import WIDTH_PX, axes_grid, envelope, new_figure
+from calibration.report.figures.style import WIDTH_PX, axes_grid, envelope, new_figure
 from reach_receiver.config.monitoring import AlarmRule
 from reach_receiver.monitor.database import MetricsDatabase
 from reach_receiver.monitor.readings import parse_key

@@ -3,8 +3,8 @@
 The instrument's own SOL (:meth:`Vna.calibrate_sol`) assumes whichever kit it was told
 (``SENS1:CORR:COLL:CKIT``) and keeps its error terms inside the instrument, where no run
 file can see them. Done on the host, the raw (uncorrected) sweeps of the three standards
-are kept, the error terms come from :func:`calibration.one_port.solve_one_port` with any
-kit description (:class:`calibration.cal_kit.CalKit`: offset delay, loss and impedance,
+are kept, the error terms come from :func:`calibration.rf.one_port.solve_one_port` with any
+kit description (:class:`calibration.rf.cal_kit.CalKit`: offset delay, loss and impedance,
 open capacitance and short inductance polynomials, load resistance), and every later raw
 sweep ``m`` is corrected with the one-port error model (directivity ``e00``, source match
 ``e11``, tracking ``e10e01``; Hiebel, *Fundamentals of Vector Network Analysis*, ch. 7)::
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.cal_kit import IDEAL_KIT, STANDARD_NAMES, CalKit
-from calibration.one_port import OnePortTerms, solve_one_port
+from calibration.rf.cal_kit import IDEAL_KIT, STANDARD_NAMES, CalKit
+from calibration.rf.one_port import OnePortTerms, solve_one_port
 from reach_receiver.devices.vna import Vna
 from reach_receiver.devices.vna_settings import S11Measurement
 from reach_receiver.errors import DeviceError
@@ -87,7 +87,7 @@ def calibrate_on_host(
     ------
     DeviceError
         Where two standards read alike (:data:`MIN_RAW_SEPARATION`: a stuck switch).
-    calibration.errors.DegenerateStandardsError
+    calibration.core.errors.DegenerateStandardsError
         Where the kit's standards coincide or the readings leave the system singular.
     """
     raw: dict[str, S11Measurement] = {}

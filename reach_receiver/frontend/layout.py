@@ -94,7 +94,7 @@ REFERENCE_LOAD = "cold"
 NOISE_SOURCE = "ns"
 #: The noise diode's model, written into every run file (``noise_source_model``): the
 #: engine holds a fitted T_NS to this diode's ENR table only where a run names it.
-NOISE_SOURCE_MODEL = "NC346A"  # calibration.hdf5_io.NC346A, without importing h5py
+NOISE_SOURCE_MODEL = "NC346A"  # calibration.io.hdf5_io.NC346A, without importing h5py
 
 #: TC-08 ports (thesis table 2.2); port 0 is the logger's cold junction.
 TC08_PORTS: Mapping[int, str] = MappingProxyType(

@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import median_filter
 
-from calibration.noise_waves import PARAMETERS
-from calibration.solvers import NoiseWaveSolution
+from calibration.model.noise_waves import PARAMETERS
+from calibration.solve.solvers import NoiseWaveSolution
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from calibration.solvers import AnySolution
+from calibration.solve.solvers import AnySolution
 from reach_receiver.clock import Clock, StopEvent
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.devices.vna_settings import SweepSettings

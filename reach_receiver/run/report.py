@@ -3,7 +3,7 @@
 After a run whose ``calibrate`` step stored a solution (``/calibration/solution``),
 :class:`~reach_receiver.run.session.RunSession` (so ``reach-run`` and the daemon's jobs
 alike) calls :func:`write_run_report`, which writes the engine's report
-(:func:`calibration.report.write_report`: a PNG per figure, ``summary.md``,
+(:func:`calibration.report.writer.write_report`: a PNG per figure, ``summary.md``,
 ``summary.html``) into ``<run dir>/report/``. Drawing is a convenience for the people
 who look: any failure is logged with its traceback and never fails the run, whose file
 is already closed.
@@ -27,7 +27,7 @@ def write_run_report(run_file: Path) -> Path | None:
     """Write the report of ``run_file`` beside it; its directory, or ``None`` if it failed."""
     start = time.monotonic()
     try:
-        from calibration.report import write_report  # matplotlib only when a report is drawn
+        from calibration.report.writer import write_report  # matplotlib only when a report is drawn
 
         report = write_report(run_file, run_file.parent / REPORT_DIRECTORY)
     except Exception:  # a figure that cannot be drawn must never fail the run

@@ -26,10 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration import CalibrationData
-from calibration.data import SourceData
-from calibration.identifiability import caution_lines, model_choice_line
-from calibration.per_frequency import ChannelSolution
-from calibration.solvers import AnySolution, NoiseWaveSolution, method_name
+from calibration.model.data import SourceData
+from calibration.solve.identifiability import caution_lines, model_choice_line
+from calibration.solve.per_frequency import ChannelSolution
+from calibration.solve.solvers import AnySolution, NoiseWaveSolution, method_name
 from reach_receiver.schedule.timing import hms
 from reach_receiver.store.corrections import corrections_line
 

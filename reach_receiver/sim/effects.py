@@ -18,7 +18,7 @@ Each is off by default (every simulation before them is unchanged) and switched 
 * ``cable_gradient``: the cable-based sources' terminations (thermocouples at MS3 and
   MS4, TC-08 ports 3 and 4) are ``termination_above_cable_k`` warmer than their cables
   (ports 5 and 6, the enclosure): ``T_src = G T_R + (1 - G) T_cab`` (eq. 4.9) through
-  the cable of :func:`calibration.reflections.reach_source_reflection`.
+  the cable of :func:`calibration.model.reflections.reach_source_reflection`.
 * ``hot_cable``: the heated load's 0.3 m cable is at the enclosure's temperature (port 1)
   and loses part of the load's excess the same way.
 * ``rfi``: a few narrow, intermittent spikes (an exponentially distributed power, mean
@@ -36,11 +36,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.coax import DataSheetCoax
-from calibration.reflections import CABLE_2M, CABLE_10M, HEATED_LOAD_CABLE, Cable
-from calibration.source_temperatures import available_gain, cable_source_temperature
-from calibration.touchstone import TouchstoneData, write_touchstone_network
-from calibration.two_port import embed_reflection, flip_ports
+from calibration.model.reflections import CABLE_2M, CABLE_10M, HEATED_LOAD_CABLE, Cable
+from calibration.model.source_temperatures import available_gain, cable_source_temperature
+from calibration.rf.coax import DataSheetCoax
+from calibration.rf.touchstone import TouchstoneData, write_touchstone_network
+from calibration.rf.two_port import embed_reflection, flip_ports
 from reach_receiver.config.corrections import CableSettings, CorrectionSettings
 
 FloatArray = NDArray[np.float64]
@@ -59,7 +59,7 @@ HOT_CABLE_PORT = 1
 
 
 def cable_model(cable: Cable) -> DataSheetCoax:
-    """The matched cable of :mod:`calibration.reflections` as a two-port (the same model)."""
+    """The matched cable of :mod:`calibration.model.reflections` as a two-port (the same model)."""
     return DataSheetCoax(cable.length_m, cable.velocity_factor, cable.loss_db_per_m_100mhz)
 
 

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.data import CalibrationData, Integration, SourceData
-from calibration.simulate import REACH_CALIBRATORS
+from calibration.model.data import CalibrationData, Integration, SourceData
+from calibration.model.simulate import REACH_CALIBRATORS
 from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD
 from reach_receiver.store.handover import ANTENNA, HandOver, band_channels
 

@@ -2,7 +2,7 @@
 
 The switch state (fed from the simulated Teensy's pins) decides what the LNA and the VNA
 see; the calibration engine's forward model (eqs. 3.12, 3.13, 3.20 through
-:func:`calibration.noise_waves.dicke_powers`) turns that into power spectra; radiometer
+:func:`calibration.model.noise_waves.dicke_powers`) turns that into power spectra; radiometer
 noise ``sigma_P = P / sqrt(B tau)`` is drawn for each spectrum of duration ``tau``;
 temperatures follow the enclosure (held by the simulated TEC) and a heated load that
 wanders slowly.
@@ -29,12 +29,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.basis import PolynomialBasis
-from calibration.data import CalibrationData, SourceData
-from calibration.noise_waves import dicke_powers
-from calibration.reflections import lna_reflection, reach_source_reflection, resistor
-from calibration.simulate import ITPM_CHANNEL_WIDTH_HZ, ReceiverTruth, enr_noise_temperature
-from calibration.solvers import NoiseWaveSolution
+from calibration.model.basis import PolynomialBasis
+from calibration.model.data import CalibrationData, SourceData
+from calibration.model.noise_waves import dicke_powers
+from calibration.model.reflections import lna_reflection, reach_source_reflection, resistor
+from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, ReceiverTruth, enr_noise_temperature
+from calibration.solve.solvers import NoiseWaveSolution
 from reach_receiver.clock import Clock
 from reach_receiver.frontend.layout import (
     MS2_TO_LNA,

@@ -15,11 +15,11 @@ The error terms drift linearly with the clock's time (``drift_rate_per_s``) and 
 Calibration. ``SENS1:CORR:COLL:{SHOR,OPEN,LOAD} 1`` each measure whatever ``reflection``
 returns at that moment (a wrong switch position gives a wrong calibration, as on the
 real instrument); ``SENS1:CORR:COLL:SAVE`` solves for the error terms with the engine's
-:func:`calibration.one_port.solve_one_port` (the linear system
+:func:`calibration.rf.one_port.solve_one_port` (the linear system
 ``m_i = e00 + G_i m_i e11 + G_i D``, ``D = e10e01 - e00 e11``, every frequency at once)
-for the ideal standards of :data:`calibration.cal_kit.IDEAL_KIT` (``G = -1, +1, 0``), and
+for the ideal standards of :data:`calibration.rf.cal_kit.IDEAL_KIT` (``G = -1, +1, 0``), and
 corrected data are ``G = (m - e00) / (e10e01 + e11 (m - e00))``
-(:func:`calibration.one_port.correct_reflection`).
+(:func:`calibration.rf.one_port.correct_reflection`).
 
 Faults on demand (:meth:`VnaSimulator.inject`): no reply, garbled reply, truncated data,
 connection drop before or in the middle of a reply, a queued SCPI error; and a mode in
@@ -42,9 +42,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.cal_kit import IDEAL_KIT
-from calibration.errors import CalibrationError
-from calibration.one_port import OnePortTerms, solve_one_port
+from calibration.core.errors import CalibrationError
+from calibration.rf.cal_kit import IDEAL_KIT
+from calibration.rf.one_port import OnePortTerms, solve_one_port
 from reach_receiver.clock import Clock
 from reach_receiver.sim.vna_model import ComplexArray, ErrorModel, sweep_duration_s
 from reach_receiver.transports.scpi import socket_address
@@ -64,7 +64,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 Reflection = Callable[[NDArray[np.float64]], NDArray[np.complex128]]
-_STANDARDS = ("SHOR", "OPEN", "LOAD")  # the order of calibration.cal_kit.STANDARD_NAMES
+_STANDARDS = ("SHOR", "OPEN", "LOAD")  # the order of calibration.rf.cal_kit.STANDARD_NAMES
 _LONG_FORMS = {
     "SENSE": "SENS", "FREQUENCY": "FREQ", "START": "STAR", "SWEEP": "SWE", "POINTS": "POIN",
     "BWIDTH": "BWID", "SOURCE": "SOUR", "POWER": "POW", "AVERAGE": "AVER", "COUNT": "COUN",

@@ -8,7 +8,7 @@ error model (Pozar, *Microwave Engineering*, 4th ed., sec. 4.6; scikit-rf's ``On
 with directivity ``e00``, source match ``e11`` and reflection tracking ``e10e01``.
 :class:`ErrorModel` makes these terms smooth, seeded complex functions of frequency that
 drift with time. The model itself, its solution from measured standards and the
-correction are the calibration engine's (:mod:`calibration.one_port`), so the simulated
+correction are the calibration engine's (:mod:`calibration.rf.one_port`), so the simulated
 instrument and offline calibration share one implementation.
 :func:`sweep_duration_s` gives the simulated sweep time. No I/O: the SCPI server is
 :class:`reach_receiver.sim.vna.VnaSimulator`, which re-exports these names.
@@ -21,7 +21,7 @@ import threading
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.one_port import OnePortTerms
+from calibration.rf.one_port import OnePortTerms
 
 ComplexArray = NDArray[np.complex128]
 

@@ -3,7 +3,7 @@
 A run is written as one part file per measurement (:mod:`.parts`, atomic and durable
 before ``add_*`` returns) by :class:`RunStore`, and merged into ``run.h5`` at the end
 (:func:`merge_run`, also the recovery of a killed run). The merged file carries the
-measurements as taken and the REACH layout that :func:`calibration.hdf5_io.read_run`
+measurements as taken and the REACH layout that :func:`calibration.io.hdf5_io.read_run`
 reads (:mod:`.merge`). :func:`read_run_file` reads a run back, merged or not;
 :mod:`.touchstone` re-exports the engine's Touchstone S1P/S2P reader and writer.
 :mod:`.handover` is the one place where a run's measurements become the calibration

@@ -5,20 +5,20 @@ site file's ``calibration`` section describes them (:mod:`reach_receiver.config.
 corrections`) and the step allows, corrects it in this order (issue 14, thesis 4.6-4.7):
 
 1. **MTS** (``mts``): every source's S11 de-embedded through the switch path between the
-   sources and the VNA (:func:`calibration.two_port.deembed_reflection`, eq. 4.6), and the
+   sources and the VNA (:func:`calibration.rf.two_port.deembed_reflection`, eq. 4.6), and the
    LNA's embedded through the path between the LNA and the sources
-   (:func:`~calibration.two_port.embed_reflection`, eq. 4.7): both at the sources' plane.
+   (:func:`~calibration.rf.two_port.embed_reflection`, eq. 4.7): both at the sources' plane.
    Each path file is checked for reciprocity and passivity (``check_two_port``), the
    findings reported.
 2. **Cables** (``cables``): each listed calibrator's temperature becomes
-   ``G T_R + (1 - G) T_cab`` (eqs. 4.8-4.9, :mod:`calibration.source_temperatures`), ``T_R``
+   ``G T_R + (1 - G) T_cab`` (eqs. 4.8-4.9, :mod:`calibration.model.source_temperatures`), ``T_R``
    its own thermocouple's (the hand-over's), ``T_cab`` its cable's port averaged over the
    same cycles (the hand-over's ``thermocouples_k``), ``G`` the cable's available gain with
    the termination ``deembed(G_src, S_cable)`` behind it, clipped to ``[0, 1]`` (a VNA's
    noise on an open or short termination can push it just outside).
-3. **RFI** (``rfi``): :func:`calibration.rfi.flag_spectrum` (5 sigma) on every source's
+3. **RFI** (``rfi``): :func:`calibration.checks.rfi.flag_spectrum` (5 sigma) on every source's
    three Dicke spectra (the calibrators' and the antenna's; the cable sources' ripple is
-   followed by the flagger's trend, :func:`calibration.rfi.calibrator_flags`); the
+   followed by the flagger's trend, :func:`calibration.checks.rfi.calibrator_flags`); the
    channels flagged anywhere are dropped from every source, and their frequencies and
    counts kept in the report.
 
@@ -33,12 +33,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.coax import DataSheetCoax
-from calibration.data import CalibrationData, SourceData
-from calibration.rfi import flag_spectrum
-from calibration.source_temperatures import available_gain, cable_source_temperature
-from calibration.touchstone import read_touchstone_network
-from calibration.two_port import (
+from calibration.checks.rfi import flag_spectrum
+from calibration.model.data import CalibrationData, SourceData
+from calibration.model.source_temperatures import available_gain, cable_source_temperature
+from calibration.rf.coax import DataSheetCoax
+from calibration.rf.touchstone import read_touchstone_network
+from calibration.rf.two_port import (
     check_two_port,
     deembed_reflection,
     embed_reflection,

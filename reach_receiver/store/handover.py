@@ -21,11 +21,11 @@ A calibration made during a run (the ``calibrate`` step), the run file's engine 
      whose spectra do not cover the band's channels, is left out with a warning.
 
 2. :func:`write_layout` writes the chosen measurements in REACH's layout (the
-   calibration engine's :mod:`calibration.hdf5_io`), with the hand-over itself as the
+   calibration engine's :mod:`calibration.io.hdf5_io`), with the hand-over itself as the
    ``handover`` attribute (JSON) of ``/observation_metadata``.
 
 3. :func:`engine_layout` reads that layout back with the engine's own reader
-   (:func:`calibration.hdf5_io.read_run_layout`, the body of ``read_run``) from a file
+   (:func:`calibration.io.hdf5_io.read_run_layout`, the body of ``read_run``) from a file
    built in memory: the numbers the engine sees during a run are, bit for bit, those
    ``reach-cal`` reads from the merged run file.
 
@@ -33,7 +33,7 @@ S11s are interpolated onto the channels by cubic splines through their real and
 imaginary parts (:func:`interpolate_s11`): the REACH sources' reflections are smooth
 on the VNA's grid (the 10 m cable's ripple has a period of about 10 MHz). Each sweep's
 trace noise, estimated from its own scatter on the VNA's grid
-(:func:`calibration.reflection_noise.trace_noise`), goes beside it as ``{src}_s11_std``
+(:func:`calibration.model.reflection_noise.trace_noise`), goes beside it as ``{src}_s11_std``
 (``lna_s11_std``), so that the solver, the error bars and the floor carry it; how many
 channels share one sweep point's error goes beside them (``reflection_correlation_channels``
 of ``observation_metadata``: the sweep step over the channel width, ~8 for REACH), which
@@ -55,8 +55,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
-from calibration.hdf5_io import RECEIVER_RUN_FORMAT, RunLayout, read_run_layout
-from calibration.reflection_noise import trace_noise
+from calibration.io.hdf5_io import RECEIVER_RUN_FORMAT, RunLayout, read_run_layout
+from calibration.model.reflection_noise import trace_noise
 from reach_receiver.frontend.layout import NOISE_SOURCE_MODEL
 
 from .parts import (
@@ -296,7 +296,7 @@ def write_layout(f: Any, groups: Groups, handover: HandOver) -> None:
 
     def noise(name: str, dataset_name: str) -> None:
         # The sweep's trace noise, from its own scatter on the VNA's grid, per channel
-        # (calibration.reflection_noise.trace_noise; nothing where it cannot tell).
+        # (calibration.model.reflection_noise.trace_noise; nothing where it cannot tell).
         g = groups[handover.s11[name]]
         sigma = trace_noise(g["s11"][()])
         if sigma is not None:
@@ -354,7 +354,7 @@ def _shared_channels(groups: Groups, handover: HandOver) -> float:
     """Channels that share one sweep point's error: the widest S11 step / channel width.
 
     The splines carry each point's trace noise onto the channels around it
-    (:mod:`calibration.correlated_reflections`); 1 where a sweep is finer than the channels.
+    (:mod:`calibration.solve.correlated_reflections`); 1 where a sweep is finer than the channels.
     """
     steps = [
         float(np.median(np.diff(groups[number]["frequencies"][()])))

@@ -6,7 +6,7 @@ The merged file (root attributes ``format = "reach-receiver-run"``, ``format_ver
 
     /run/                         schedule_<i> (text, attr path), site (YAML), metadata (JSON)
     /measurements/NNNNNN_<kind>_<name>/   every measurement as written (run_store docstring)
-    /observation_data/            the REACH / engine layout (calibration.hdf5_io), chosen
+    /observation_data/            the REACH / engine layout (calibration.io.hdf5_io), chosen
         frequencies               and written by the hand-over (:mod:`.handover`):
         {src}_spectra, {src}_load_spectra, {src}_ns_spectra
                                   input 0, band channels; (n,) for one Dicke cycle,
@@ -48,8 +48,8 @@ from typing import Any
 import h5py
 import numpy as np
 
-from calibration.errors import FileFormatError
-from calibration.hdf5_io import RECEIVER_RUN_FORMAT
+from calibration.core.errors import FileFormatError
+from calibration.io.hdf5_io import RECEIVER_RUN_FORMAT
 from reach_receiver.frontend.layout import NOISE_SOURCE_MODEL
 
 from .handover import HandOver, select, write_layout

@@ -3,7 +3,7 @@
 :func:`read_run_file` lists the measurements in order with the run description and
 status; arrays are read on demand (:meth:`RunContents.read`), and
 :meth:`RunContents.calibration_data` gives what the engine's
-:func:`calibration.hdf5_io.read_run` returns for the merged file. An unmerged directory
+:func:`calibration.io.hdf5_io.read_run` returns for the merged file. An unmerged directory
 (a run still going, or killed and not yet recovered) is read from its parts without
 changing it: its engine view is built in a temporary merged file.
 """
@@ -20,11 +20,11 @@ from typing import Any
 import h5py
 import numpy as np
 
-from calibration.data import CalibrationData, SourceData
-from calibration.errors import FileFormatError
-from calibration.hdf5_io import RECEIVER_RUN_FORMAT, read_run
-from calibration.solution_file import read_solution_group
-from calibration.solvers import AnySolution
+from calibration.core.errors import FileFormatError
+from calibration.io.hdf5_io import RECEIVER_RUN_FORMAT, read_run
+from calibration.io.solution_file import read_solution_group
+from calibration.model.data import CalibrationData, SourceData
+from calibration.solve.solvers import AnySolution
 
 from .merge import (
     RUN_FILE,
@@ -116,7 +116,7 @@ class RunContents:
             return read_solution_group(f[found[-1].location]["solution"], found[-1].file)
 
     def calibration_data(self) -> tuple[CalibrationData, dict[str, SourceData]]:
-        """What :func:`calibration.hdf5_io.read_run` returns for the merged run."""
+        """What :func:`calibration.io.hdf5_io.read_run` returns for the merged run."""
         if self.merged:
             return read_run(self.path)
         with tempfile.TemporaryDirectory(prefix="reach-run-") as tmp:

@@ -43,10 +43,10 @@ from typing import Any
 import h5py
 import numpy as np
 
-from calibration.data import CalibrationData, SourceData
-from calibration.hdf5_io import RunLayout
-from calibration.solution_file import write_solution_group
-from calibration.solvers import AnySolution
+from calibration.io.hdf5_io import RunLayout
+from calibration.io.solution_file import write_solution_group
+from calibration.model.data import CalibrationData, SourceData
+from calibration.solve.solvers import AnySolution
 
 from .handover import RECEIVER, HandOver, engine_layout, select
 from .merge import RUN_FILE, Record, merge_run

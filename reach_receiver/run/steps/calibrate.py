@@ -2,7 +2,7 @@
 
 ``{f_lo_hz: 50e6, f_hi_hz: 130e6, solver: radiometric, benchmark: previous.h5,
 tolerance: 0.05}``. The run's measurements so far go to the solver ``solver`` names
-(:mod:`calibration.solvers`: ``radiometric``, ``thesis``, ``least-squares`` or
+(:mod:`calibration.solve.solvers`: ``radiometric``, ``thesis``, ``least-squares`` or
 ``bayesian``; default the site's ``calibration.solver``, else ``radiometric``) through the store's
 hand-over (:mod:`reach_receiver.store.handover`: every Dicke cycle of each source, the
 latest calibrated S11s, the calibrators' thermocouple temperatures), the same hand-over
@@ -20,7 +20,7 @@ one out. What was done is stored in the solution's hand-over (``corrections``).
 
 ``vna_accuracy: DRAWS`` (0 by default) carries the VNA's data-sheet accuracy (thesis table
 2.3) onto the validation source as a systematic error, from ``DRAWS`` refits with every
-reflection moved by a draw of it (:mod:`calibration.vna_systematics`; about 60 ms a draw
+reflection moved by a draw of it (:mod:`calibration.checks.vna_systematics`; about 60 ms a draw
 for 12 calibrators x 6554 channels); the run summary states it beside the floor.
 """
 
@@ -36,12 +36,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from calibration import CalibrationData
-from calibration.data import SourceData
-from calibration.errors import FileFormatError, IllPosedError
-from calibration.per_frequency import ChannelSolution
-from calibration.reflection_noise import reflection_variance
-from calibration.solution_file import read_solution
-from calibration.solvers import (
+from calibration.checks.vna_systematics import ReflectionSystematics, reflection_systematics
+from calibration.core.errors import FileFormatError, IllPosedError
+from calibration.io.solution_file import read_solution
+from calibration.model.data import SourceData
+from calibration.model.reflection_noise import reflection_variance
+from calibration.solve.per_frequency import ChannelSolution
+from calibration.solve.solvers import (
     METHODS,
     AnySolution,
     method_name,
@@ -49,7 +50,6 @@ from calibration.solvers import (
     solution_noise_floor,
     solver,
 )
-from calibration.vna_systematics import ReflectionSystematics, reflection_systematics
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
@@ -74,7 +74,7 @@ class Calibrate(Step):
     With a ``benchmark`` solution file, the new solution is verified against it: every
     parameter's band-averaged value within ``tolerance`` (thesis 2.1.3: 5 %). ``f_lo_hz``
     and ``f_hi_hz`` default to the site's band, ``solver`` (one of
-    :data:`calibration.solvers.METHODS`) to the site's solver.
+    :data:`calibration.solve.solvers.METHODS`) to the site's solver.
     """
 
     benchmark: Path | None = None
@@ -97,7 +97,7 @@ class CalibrationOutcome:
     (a per-channel error of the calibrated source that no calibration removes), and
     neither its radiometer noise.
     The floor is that of the solution's own kind of model
-    (:func:`calibration.solvers.solution_noise_floor`: polynomial or per channel).
+    (:func:`calibration.solve.solvers.solution_noise_floor`: polynomial or per channel).
     """
 
     solution: AnySolution
@@ -156,7 +156,7 @@ def calibrate(
     """Solve the run so far over ``band_hz`` with ``method``, corrected as asked.
 
     ``vna_draws > 0`` carries the VNA's data-sheet accuracy (table 2.3) onto the
-    validation source by that many refits (:mod:`calibration.vna_systematics`).
+    validation source by that many refits (:mod:`calibration.checks.vna_systematics`).
     """
     view = run.store.engine_view(band_hz)
     handover = view.handover

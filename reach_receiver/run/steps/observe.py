@@ -17,7 +17,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from calibration.solvers import band_hz
+from calibration.solve.solvers import band_hz
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where

@@ -1,0 +1,5 @@
+"""The engine's foundation, used by every other part.
+
+Its errors, the names and constants a site file or command line is checked against,
+crash-safe file replacement, BLAS threads.
+"""
