@@ -2,6 +2,7 @@
 
 import json
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -145,6 +146,20 @@ def test_a_running_daemon_fires_each_occurrence_once(tmp_path):
     assert not trigger.late
     assert t.due(at + 10) == []
 
+
+
+def test_remembered_occurrences_are_those_of_the_sky_at_any_turn(tmp_path):
+    # turns forwards, backwards (a clock set back) and days apart: each turn's answer is
+    # the one a fresh question gives, and the next occurrence is at the timer's LST
+    t = timers(tmp_path)
+    t.start(START)
+    rng = random.Random(38)
+    for now in [START + rng.uniform(-3, 3) * 86_400 for _ in range(30)]:
+        got = t.next_occurrences(now)["night"]
+        assert now < got <= now + SIDEREAL_DAY_S + 1e-3
+        lst = local_sidereal_time_h(datetime.fromtimestamp(got, tz=timezone.utc), LONGITUDE)
+        assert abs((lst - 22.0 + 12) % 24 - 12) * 3600 < 1e-3
+        assert got == pytest.approx(lst_occurrence_after(now), abs=1e-3)
 
 @pytest.mark.parametrize(
     ("policy", "down_after_s", "expected"),

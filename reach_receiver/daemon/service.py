@@ -39,7 +39,7 @@ from reach_receiver.monitor import Monitor
 from reach_receiver.run.steps import STANDARD_KINDS
 from reach_receiver.run.summary import Truth
 from reach_receiver.schedule.kinds import KindRegistry
-from reach_receiver.schedule.lst import apparent_lst_h
+from reach_receiver.schedule.lst import load_tables
 
 from .base import Directories
 from .control import SOCKET_FILE, ControlServer
@@ -152,7 +152,7 @@ class Daemon(ControlRequests):
         self._recover()
         self._state_file_alarms()
         # The first sidereal time costs a second (astropy's tables): not in a first run.
-        apparent_lst_h([self.clock.now()], self.site.longitude_deg)
+        load_tables()
         for trigger in self.timers.start(self.clock.now()):
             self._queue_timer(trigger)
         self._check_timers()

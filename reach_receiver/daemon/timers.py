@@ -11,6 +11,11 @@ daemon was down is *missed*: with ``policy: late`` it fires at start if it is at
 ``window_s`` old, otherwise (or with ``policy: skip``) it is skipped, with a log line
 either way. The first start ever fires nothing from the past.
 
+Each timer remembers its current interval between occurrences, so a turn of the loop
+asks astropy for a sidereal time only when an occurrence has passed (twice a sidereal
+day): each question costs about 4 ms (:mod:`reach_receiver.schedule.lst`), which every
+0.5 s turn would otherwise pay per timer.
+
 A ``timers.json`` that cannot be written (a full disk) keeps its previous contents: the
 daemon goes on with the timers' state in memory, logs the failure once, names it in
 :attr:`Timers.write_error` and writes again at the next checkpoint.
@@ -85,6 +90,8 @@ class Timers:
         self._written = -float("inf")
         #: Why the state file could not be read at start (``None``: it was, or was absent).
         self.read_error: str | None = None
+        #: Per timer, its occurrence at or before the last ``now`` asked and the next one.
+        self._interval: dict[str, tuple[float, float]] = {}
         found, self.read_error = read_state(self.path, _parse_state)
         if found is not None:
             self.fired, self.checked = found
@@ -97,7 +104,7 @@ class Timers:
         policy, window = self.settings.missed_policy, self.settings.missed_window_s
         late: list[Trigger] = []
         for timer in self.settings.timers:
-            at = previous_occurrence(timer, now, self.longitude_deg)
+            at = self._interval_at(timer, now)[0]
             if at <= max(self.checked, self.fired.get(timer.name, -float("inf"))):
                 continue
             age = now - at
@@ -115,7 +122,7 @@ class Timers:
         """The occurrences that passed since the last call (each fires once)."""
         due: list[Trigger] = []
         for timer in self.settings.timers:
-            at = previous_occurrence(timer, now, self.longitude_deg)
+            at = self._interval_at(timer, now)[0]
             since = max(self.checked or now, self.fired.get(timer.name, -float("inf")))
             if since < at <= now:
                 log.info("timer %s: due at %s", timer.name, _utc(at))
@@ -129,11 +136,21 @@ class Timers:
 
     def next_occurrences(self, now: float) -> dict[str, float]:
         """When each timer fires next."""
-        day = {True: SIDEREAL_DAY_S, False: 86_400.0}
-        return {
-            t.name: previous_occurrence(t, now, self.longitude_deg) + day[t.at_lst_h is not None]
-            for t in self.settings.timers
-        }
+        return {t.name: self._interval_at(t, now)[1] for t in self.settings.timers}
+
+    def _interval_at(self, timer: TimerSettings, now: float) -> tuple[float, float]:
+        """The timer's occurrence at or before ``now`` and the one after it (remembered)."""
+        known = self._interval.get(timer.name)
+        if known is not None and known[0] <= now < known[1]:
+            return known
+        at = previous_occurrence(timer, now, self.longitude_deg)
+        if timer.at_lst_h is None:
+            following = at + 86_400.0
+        else:  # the sidereal day varies by milliseconds: ask rather than add
+            after = datetime.fromtimestamp(at + 1.0, tz=timezone.utc)
+            following = next_utc_at_lst(after, timer.at_lst_h, self.longitude_deg).timestamp()
+        self._interval[timer.name] = (at, following)
+        return at, following
 
     def _save(self, now: float) -> None:
         self.checked = now
