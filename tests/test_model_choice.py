@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from calibration.choice.averaging import MixturePosterior, mixture_of, with_smooth_hypothesis
-from calibration.choice.model_fit import OrderChoice, significant_orders
-from calibration.choice.order_search import search_orders_jointly
+from calibration.choice.model_fit import OrderChoice
+from calibration.choice.order_search import search_orders_jointly, significant_orders
 from calibration.choice.parameter_scales import draw_scales, evidence_gradient
 from calibration.core.errors import IllPosedError
 from calibration.model.polynomial_model import full_indices
@@ -140,7 +140,7 @@ def test_the_search_finds_the_exhaustive_best_on_simulated_runs(seed):
     exhaustive = dict(zip(models, many(models), strict=True))
     best = max(exhaustive, key=exhaustive.__getitem__)
     # From the smallest model, as the thesis's climb starts, and from where the solver
-    # starts (model_fit.significant_orders), one model at a time or a step's at once.
+    # starts (order_search.significant_orders), one model at a time or a step's at once.
     start = significant_orders(normal, prior, (1,) * 5, (6,) * 5)
     for starts, scorer in (([], None), ([start], None), ([start], many)):
         found = search_orders_jointly(evidence, (1,) * 5, (6,) * 5, starts=starts, many=scorer)

@@ -13,7 +13,8 @@ from calibration.choice.averaging import (
     select_components,
     with_smooth_hypothesis,
 )
-from calibration.choice.model_fit import OrderChoice, _hypotheses_with_own_widths
+from calibration.choice.hypotheses import hypotheses_with_own_widths
+from calibration.choice.model_fit import OrderChoice
 from calibration.choice.parameter_scales import (
     evidence_gradient,
     maximise,
@@ -203,7 +204,7 @@ def test_own_widths_for_each_hypothesis_reduce_to_the_shared_pool(eight_cal_norm
     variances = scales.variances(full)[0]  # as the smooth component is solved
     z_full = solve(normal, full, np.zeros_like(variances), variances, None).log_evidence
     grids = {m: np.array([z_full + lift]) for m, lift in lifts.items()}
-    joined = _hypotheses_with_own_widths(normal, grids, full, box, (scales, scales), None, 0.0)
+    joined = hypotheses_with_own_widths(normal, grids, full, box, (scales, scales), None, 0.0)
     pooled = mixture_posterior(
         normal, select_components(with_smooth_hypothesis(grids, full, box)), scales, None, 0.0
     )
@@ -353,7 +354,7 @@ def test_each_hypothesis_takes_its_own_occam_factor(eight_cal_normal):
     grids = {(2, 1, 2, 3, 1): np.array([z_full + 9.0]), (3, 1, 2, 3, 2): np.array([z_full + 9.5])}
 
     def weights(occam):
-        joined = _hypotheses_with_own_widths(
+        joined = hypotheses_with_own_widths(
             normal, grids, full, box, (scales, scales), None, 0.0, occam
         )
         return joined.model_weights()

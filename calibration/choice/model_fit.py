@@ -1,23 +1,25 @@
 """Fit one polynomial model, or choose the orders by evidence, on built normal equations.
 
 Shared by the thesis solver and the radiometric solver: they differ only in how they build
-the :class:`~calibration.regression.normal_equations.NormalEquations` (likelihood) and in their
-priors. With a fixed :class:`~calibration.regression.conjugate.CoefficientPrior` (the thesis's), one
-model is chosen by a climb over orders; with a :class:`~calibration.regression.conjugate.TermPrior`
-(term sizes known beforehand), every model between the order limits is scored and
-averaged; with a
-:class:`~calibration.regression.shrinkage.ShrinkagePrior` (the radiometric solver's default), the
-prior's scales are set by the data, one per parameter (:mod:`calibration.choice.scale_fit`:
-at the largest model, then refitted at the first search's best for a second, each
-hypothesis weighed with its widths marginalised by Laplace's method; or one
-shared scale, marginalised on a grid), the climb
-moves parameters jointly from the clearly measured terms (:func:`significant_orders`),
-scoring each step's models in one batch (:meth:`ParameterScales.log_evidences
+the :class:`~calibration.regression.normal_equations.NormalEquations` (likelihood) and in
+their priors. With a fixed :class:`~calibration.regression.conjugate.CoefficientPrior`
+(the thesis's), one model is chosen by a climb over orders; with a
+:class:`~calibration.regression.conjugate.TermPrior` (term sizes known beforehand), every
+model between the order limits is scored and averaged; with a
+:class:`~calibration.regression.shrinkage.ShrinkagePrior` (the radiometric solver's
+default), the prior's scales are set by the data, one per parameter
+(:mod:`calibration.choice.scale_fit`: at the largest model, then refitted at the first
+search's best for a second, each hypothesis weighed with its widths marginalised by
+Laplace's method; or one shared scale, marginalised on a grid), the climb moves
+parameters jointly from the clearly measured terms
+(:func:`~calibration.choice.order_search.significant_orders`), scoring each step's models
+in one batch (:meth:`ParameterScales.log_evidences
 <calibration.choice.scale_fit.ParameterScales.log_evidences>`, or
 :class:`~calibration.regression.shrinkage.EvidenceGrid`), and the posterior is the
 evidence-weighted mixture of the models that carry the weight
-(:mod:`calibration.choice.averaging`; with the smooth-function hypothesis, and under a shared
-scale also the smooth functions under a scale per parameter marginalised,
+(:mod:`calibration.choice.averaging`; with the smooth-function hypothesis
+(:mod:`calibration.choice.hypotheses`), and under a shared scale also the smooth
+functions under a scale per parameter marginalised,
 :mod:`calibration.choice.parameter_scales`), or of the best model's prior scales alone.
 """
 
@@ -30,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import IllPosedError
-from ..model.polynomial_model import Orders, as_orders, coefficient_slices
+from ..model.polynomial_model import Orders, as_orders
 from ..regression.conjugate import (
     CoefficientPrior,
     LinearPosterior,
@@ -49,7 +51,8 @@ from .averaging import (
     smooth_prior_share,
     with_smooth_hypothesis,
 )
-from .order_search import search_orders, search_orders_jointly
+from .hypotheses import hypotheses_with_own_widths
+from .order_search import search_orders, search_orders_jointly, significant_orders
 from .parameter_scales import BEHIND_NATS, draw_scales
 from .scale_fit import ParameterScales, fit_largest, fit_scales, log_occam
 
@@ -307,7 +310,7 @@ def _fit_shrinkage(
     runs twice: under the widths fitted at the largest model, then from its best
     under the widths refitted at that best; the second table is the one returned, and
     the smooth-function hypothesis keeps the first widths
-    (:func:`_hypotheses_with_own_widths`).
+    (:func:`~calibration.choice.hypotheses.hypotheses_with_own_widths`).
 
     Where the data identify only some models of the box (``normal.identified``,
     :class:`~calibration.regression.errors_in_variables.Identified`), the widths and the smooth
@@ -446,7 +449,7 @@ def _fit_shrinkage(
                     log_occam(normal, refitted_at, widths, prior, scale_prior),
                     log_occam(normal, full, smooth_widths, prior, scale_prior),
                 )
-                return _hypotheses_with_own_widths(
+                return hypotheses_with_own_widths(
                     normal, grids, full, box, (widths, smooth_widths), scale_prior, table[best],
                     occam,
                 )
@@ -471,85 +474,6 @@ def _fit_shrinkage(
         )
 
     return posterior, table
-
-
-def _hypotheses_with_own_widths(
-    normal: NormalEquations,
-    grids: dict[Orders, np.ndarray],
-    full: Orders,
-    n_models: int,
-    widths: tuple[ParameterScales, ParameterScales],
-    scale_prior: ScalePrior | None,
-    log_evidence: float,
-    occam: tuple[float, float] = (0.0, 0.0),
-) -> LinearPosterior:
-    """The two hypotheses of :func:`with_smooth_hypothesis`, each under its own widths.
-
-    The polynomials under the widths refitted at their evidence-best model (the first of
-    ``widths``; ``grids`` holds their evidences), every model of the box (``n_models``)
-    equally likely; the smooth functions, ``full``, under the widths fitted at the largest
-    model (the second), their own fit under that hypothesis. Prior
-    odds :func:`~calibration.choice.averaging.smooth_prior_share` (that of one model of the box).
-    ``occam`` is what
-    marginalising each hypothesis's widths adds to its evidence
-    (:func:`~calibration.choice.scale_fit.log_occam`, at the model where the polynomials' widths
-    were refitted and at ``full``).
-
-    Measured with and without it (``benchmarks/README.md``, "What the model-choice runs
-    showed"): at the widths' modes alone the smooth functions, which fit their five
-    widths to every term of the box, won runs of exact quadratics 6-10 nats below the
-    best polynomial, and their decay shrank the real quadratic terms (the issue's case:
-    median error / floor 1.002, RMS 1.106); with the widths marginalised, 0.907 and
-    1.082.
-    """
-    polynomials = {
-        m: np.asarray(g) - np.log(n_models) + occam[0] for m, g in grids.items()
-    }
-    mixture = mixture_posterior(
-        normal, select_components(polynomials), widths[0], scale_prior, log_evidence
-    )
-    variances = widths[1].variances(full)[0]
-    smooth = solve(normal, full, np.zeros_like(variances), variances, scale_prior)
-    share = smooth_prior_share(n_models)
-    odds = float(np.log(share / (1.0 - share)))
-    return join_hypotheses(
-        mixture, pool_log_evidence(polynomials), [smooth],
-        np.array([smooth.log_evidence + odds + occam[1]]),
-    )
-
-
-#: A term this many posterior sd from zero in the largest model's fit starts the climb.
-START_SIGMAS = 3.0
-
-
-def significant_orders(
-    normal: NormalEquations, prior: ShrinkagePrior, lo: Orders, hi: Orders,
-    sigmas: float = START_SIGMAS,
-) -> Orders:
-    """Where the climb starts: each parameter up to its last clearly measured term.
-
-    In the reference fit of the largest model (under the grid's widest prior, so the data
-    decide), the last term of each parameter whose coefficient is ``sigmas`` marginal
-    standard deviations from zero, clipped to ``[lo, hi]``. A term that clear is one the
-    evidence keeps, so the climb starts near its end and mostly steps around it instead of
-    walking up from the smallest model. Measured over the benchmark's ensembles
-    (``benchmarks.model_choice``, 84 runs): the climb ended at the same model as from the
-    smallest one in 74, a better one in 5 and a worse one in 5, with 63 evaluations on
-    average instead of 88; on REACH-like truths 64 instead of 179, the same model in 12
-    of 12. (At 2 sigma it started too high and ended worse in 25 of 84.)
-    """
-    ridge = 1.0 / prior.widest_variances(normal.max_orders)
-    try:
-        covariance = np.linalg.inv(normal.gram + np.diag(ridge))
-    except np.linalg.LinAlgError:
-        return lo
-    z = np.abs(normal.reference) / np.sqrt(np.maximum(np.diag(covariance), np.finfo(float).tiny))
-    orders = []
-    for k, part in enumerate(coefficient_slices(normal.max_orders)):
-        clear = np.flatnonzero(z[part][1:] > sigmas)
-        n = 2 + int(clear[-1]) if clear.size else 1
-        orders.append(min(max(n, lo[k]), hi[k]))
-    return as_orders(orders)
 
 
 def _constrained(normal: NormalEquations, orders: Orders) -> bool:

@@ -38,7 +38,7 @@ from .model_checks import fit_warnings
 from .model_fit import OrderChoice, Prior, _fit
 
 #: A parameter's limit is raised only where a term at its edge is this many posterior sd
-#: from zero (the climb's start uses the same figure: ``model_fit.START_SIGMAS``).
+#: from zero (the climb's start uses the same figure: ``order_search.START_SIGMAS``).
 EDGE_SIGMAS = 3.0
 
 

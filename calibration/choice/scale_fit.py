@@ -41,7 +41,7 @@ Which model is the question of each hypothesis of :mod:`calibration.choice.avera
   parameter with one term has no ``tau_k`` in its evidence and keeps its width), and the
   orders searched again from that best under the new widths; the polynomials are
   averaged under them and the smooth functions under the first
-  (:func:`calibration.choice.model_fit._hypotheses_with_own_widths`).
+  (:func:`calibration.choice.hypotheses.hypotheses_with_own_widths`).
 
 Each hypothesis's evidence is then taken with its widths marginalised, not at their
 mode (:func:`log_occam`, Laplace's method about the mode): five widths fitted to the 35
