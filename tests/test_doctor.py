@@ -9,22 +9,16 @@ import pytest
 from sites import planning_site
 
 from reach_receiver.config.site import replace_devices
-from reach_receiver.daemon.doctor import (
-    STATUSES,
-    Check,
-    KernelClock,
-    check_clock,
+from reach_receiver.daemon.doctor import run_checks
+from reach_receiver.daemon.doctor.clock import KernelClock, check_clock, clock_check
+from reach_receiver.daemon.doctor.devices import device_checks
+from reach_receiver.daemon.doctor.disk import check_disk, run_bytes_per_hour
+from reach_receiver.daemon.doctor.outcome import STATUSES, Check, failed, format_checks
+from reach_receiver.daemon.doctor.paths import (
     check_device_path,
     check_directory,
-    check_disk,
     check_library_path,
-    clock_check,
-    device_checks,
     device_path_checks,
-    failed,
-    format_checks,
-    run_bytes_per_hour,
-    run_checks,
 )
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings, free_udp_port
 from reach_receiver.sim.tec import TecSimulator

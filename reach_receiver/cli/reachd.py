@@ -237,8 +237,15 @@ def seconds_since_start() -> float:
 def _check(site: SiteConfig, args: argparse.Namespace) -> int:
     """The installation's checks; the devices only when no daemon owns them."""
     from reach_receiver.clock import SystemClock
-    from reach_receiver.daemon import doctor
-    from reach_receiver.daemon.doctor import Check, failed, format_checks, run_checks
+    from reach_receiver.daemon.doctor import run_checks
+    from reach_receiver.daemon.doctor.clock import check_clock
+    from reach_receiver.daemon.doctor.disk import (
+        DEFAULT_MIN_FREE_BYTES,
+        check_disk,
+        run_bytes_per_hour,
+    )
+    from reach_receiver.daemon.doctor.outcome import Check, failed, format_checks
+    from reach_receiver.daemon.doctor.paths import check_directory, device_path_checks
     from reach_receiver.daemon.lock import HardwareBusy, HardwareLock
 
     site = _with_dirs(site, args)
@@ -248,13 +255,12 @@ def _check(site: SiteConfig, args: argparse.Namespace) -> int:
         lock.acquire()
     except (HardwareBusy, OSError) as err:
         checks = [Check("devices", "warn", f"not probed: {err}")]
-        checks += doctor.device_path_checks(site)
-        checks.append(doctor.check_clock())
+        checks += device_path_checks(site)
+        checks.append(check_clock())
         data = state / "runs"
-        checks.append(doctor.check_disk(data, doctor.DEFAULT_MIN_FREE_BYTES,
-                                        doctor.run_bytes_per_hour(site)))
-        checks.append(doctor.check_directory("data dir", data, private=True))
-        checks.append(doctor.check_directory("runtime dir", runtime, private=False))
+        checks.append(check_disk(data, DEFAULT_MIN_FREE_BYTES, run_bytes_per_hour(site)))
+        checks.append(check_directory("data dir", data, private=True))
+        checks.append(check_directory("runtime dir", runtime, private=False))
     else:
         try:
             checks = run_checks(site, clock=SystemClock(), data_dir=state / "runs",
