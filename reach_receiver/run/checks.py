@@ -1,4 +1,4 @@
-"""The run's checks: the VNA against its test load, a new solution against a benchmark, RFI.
+"""The run's checks: the VNA against its test load, a new solution against a benchmark.
 
 Pure functions of arrays, so each is tested on its own and the runner only records
 their verdicts.
@@ -13,10 +13,8 @@ their verdicts.
   polynomial coefficients depend on the basis and order, so the comparison is made on
   the parameters themselves, band-averaged: ``|<T_new> - <T_ref>| / |<T_ref>|`` for each
   of T_unc, T_cos, T_sin, T_NS, T_L.
-* **RFI**: a smooth spectrum (a degree-7 polynomial, refitted without the outliers) is
-  removed first, then what is left of broad structure by a running median over
-  ``window`` channels; a channel is flagged when its residual exceeds ``threshold``
-  times the robust scatter (1.4826 x MAD).
+
+RFI flags of calibrated spectra are the engine's (:func:`calibration.checks.rfi.flag_sky`).
 """
 
 from __future__ import annotations
@@ -25,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import median_filter
 
 from calibration.model.noise_waves import PARAMETERS
 from calibration.solve.solvers import NoiseWaveSolution
@@ -88,20 +85,3 @@ def compare_with_benchmark(
         name: float(abs(a - b) / abs(b)) for name, a, b in zip(PARAMETERS, new, old, strict=True)
     }
     return BenchmarkVerdict(max(differences.values()) <= tolerance, differences, tolerance)
-
-
-def rfi_flags(spectrum: FloatArray, threshold: float = 5.0, window: int = 65) -> NDArray[np.bool_]:
-    """Channels whose excess over a running median exceeds ``threshold`` robust sigmas."""
-    values = np.asarray(spectrum, dtype=float)
-    x = np.linspace(-1.0, 1.0, values.size)
-    keep = np.ones(values.size, dtype=bool)
-    for _ in range(3):  # refit without the outliers of the previous fit
-        fit = np.polynomial.legendre.Legendre.fit(x[keep], values[keep], 7)
-        detrended = values - fit(x)
-        spread = 1.4826 * np.median(np.abs(detrended[keep] - np.median(detrended[keep])))
-        keep = np.abs(detrended) <= threshold * spread if spread > 0 else keep
-    residual = detrended - median_filter(detrended, size=window, mode="reflect")
-    scatter = 1.4826 * np.median(np.abs(residual - np.median(residual)))
-    if not scatter > 0:
-        return np.zeros(values.shape, dtype=bool)
-    return np.asarray(np.abs(residual) > threshold * scatter)

@@ -5,9 +5,9 @@
 ``test_load_every``-th cycle the VNA is checked on its test load (recalibrated as the
 step's ``test_load_check`` would). With a solution from an earlier ``calibrate`` step,
 each cycle is calibrated at once, through the store's hand-over with that one cycle and
-the latest S11s, over the solution's band, and its RFI channels flagged
-(:func:`~reach_receiver.run.checks.rfi_flags`); the calibrated spectrum is stored as
-``<source>_<cycle>``.
+the latest S11s, over the solution's band, and its RFI channels flagged by the engine's
+flagger (:func:`calibration.checks.rfi.flag_sky`: its noise level follows the sky's); the
+calibrated spectrum is stored as ``<source>_<cycle>``.
 """
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from calibration.checks.rfi import flag_sky
 from calibration.solve.solvers import band_hz
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
 from reach_receiver.schedule.timing import TimingWalk, hms
 
-from ..checks import rfi_flags
 from ..context import RunContext
 from ..kind import RunnableKind
 from .spectra import dicke_connections, dicke_cycle
@@ -58,7 +58,7 @@ def calibrate_cycle(run: RunContext, source: str, number: int, name: str, thresh
         layout.freq_hz, layout.gamma_rec, view.others[source], layout.channel_width_hz,
         layout.gamma_rec_std,
     )
-    flags = rfi_flags(spectrum.mean, threshold)
+    flags = flag_sky(spectrum.mean, threshold)
     run.store.add_calibrated(
         name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now(),
         intervals=spectrum.intervals(),
