@@ -41,7 +41,7 @@ from reach_receiver.devices.vna_settings import S11Measurement
 from reach_receiver.errors import DeviceError, ReceiverError
 from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD
 from reach_receiver.frontend.paths import FrontEnd
-from reach_receiver.store.run_store import DICKE_POSITIONS
+from reach_receiver.store.measurements import DICKE_POSITIONS
 
 __all__ = [
     "DICKE_POSITIONS",

@@ -13,10 +13,11 @@ engine's input. :mod:`reach_receiver.disk` refuses, by name, a write the disk ha
 from reach_receiver.disk import DiskFull
 
 from .handover import HandOver
+from .measurements import DICKE_POSITIONS
 from .merge import RUN_FILE, merge_run
 from .parts import StoreError
 from .reader import Measurement, RunContents, read_run_file
-from .run_store import DICKE_POSITIONS, EngineView, RunStore, software_versions
+from .run_store import EngineView, RunStore, software_versions
 from .touchstone import TouchstoneError, read_touchstone, write_touchstone
 
 __all__ = [

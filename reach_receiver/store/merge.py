@@ -5,7 +5,7 @@ The merged file (root attributes ``format = "reach-receiver-run"``, ``format_ver
 ``name``, ``metadata`` (JSON, the engine's run metadata))::
 
     /run/                         schedule_<i> (text, attr path), site (YAML), metadata (JSON)
-    /measurements/NNNNNN_<kind>_<name>/   every measurement as written (run_store docstring)
+    /measurements/NNNNNN_<kind>_<name>/   every measurement as written (measurements docstring)
     /observation_data/            the REACH / engine layout (calibration.io.hdf5_io), chosen
         frequencies               and written by the hand-over (:mod:`.handover`):
         {src}_spectra, {src}_load_spectra, {src}_ns_spectra

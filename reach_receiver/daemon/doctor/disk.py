@@ -6,7 +6,7 @@ import shutil
 from pathlib import Path
 
 from reach_receiver.config.site import SiteConfig
-from reach_receiver.store.run_store import DICKE_POSITIONS
+from reach_receiver.store.measurements import DICKE_POSITIONS
 
 from .outcome import Check
 from .paths import existing
