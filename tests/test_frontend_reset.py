@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from reach_receiver.devices.spectrometer import AccumulatedSpectrum, Spectrometer
+from reach_receiver.devices.spectra import AccumulatedSpectrum
+from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.teensy import Teensy
 from reach_receiver.errors import DeviceError
 from reach_receiver.frontend.paths import FrontEnd

@@ -29,7 +29,8 @@ import numpy as np
 
 from reach_receiver.clock import SystemClock
 from reach_receiver.devices import spead
-from reach_receiver.devices.spectrometer import Spectrometer, SpectrometerStatistics
+from reach_receiver.devices.spectra import SpectrometerStatistics
+from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.errors import DeviceTimeout
 from reach_receiver.sim.itpm import encode_spectrum
 

@@ -24,7 +24,7 @@ from collections.abc import Callable, Mapping
 from typing import Protocol
 
 from reach_receiver.devices.board import FrontEndState
-from reach_receiver.devices.spectrometer import AccumulatedSpectrum
+from reach_receiver.devices.spectra import AccumulatedSpectrum
 from reach_receiver.devices.tc08 import Tc08Reading
 from reach_receiver.devices.tec_frames import TecStatus
 from reach_receiver.devices.vna_settings import S11Measurement, SweepSettings

@@ -15,7 +15,8 @@ packets sharing one timestamp (packet layout and channel order:
 * takes datagrams only from the iTPM's address when given one (``source``): those of
   any other sender are dropped by the transport and counted as ``packets_foreign``,
   so a spoofed or stray stream is never mixed into a spectrum;
-* returns float64 spectra in physical channel order, shape (n_inputs, n_channels).
+* returns float64 spectra in physical channel order, shape (n_inputs, n_channels), as
+  the records of :mod:`reach_receiver.devices.spectra`.
 
 :meth:`Spectrometer.integrate` flushes what was queued before the request, skips
 spectra whose integration ended before the request (their packets may still be on their
@@ -32,12 +33,12 @@ import logging
 import time
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
 from reach_receiver.clock import Clock, SystemClock
 from reach_receiver.devices import spead
+from reach_receiver.devices.spectra import AccumulatedSpectrum, SpectrometerStatistics, Spectrum
 from reach_receiver.errors import DeviceTimeout, ProtocolError
 from reach_receiver.transports.udp import UdpReceiver
 
@@ -47,85 +48,6 @@ _RETIRED_MEMORY = 64
 _POLL_S = 0.05
 _COMPLETE, _DROPPED, _FLUSHED = 0, 1, 2
 
-
-@dataclass(frozen=True)
-class Spectrum:
-    """One complete spectrum as the iTPM stamped it.
-
-    Attributes
-    ----------
-    timestamp
-        Unix time, ``sync_time + raw_timestamp x 32768 x 2.5 ns`` (taken to be the start
-        of the integration).
-    data
-        Power, float64, shape (n_inputs, n_channels), physical channel order.
-    raw_timestamp, sync_time, heap_counter
-        The packet items the spectrum carried.
-    """
-
-    timestamp: float
-    data: np.ndarray
-    raw_timestamp: int
-    sync_time: int
-    heap_counter: int
-
-
-@dataclass(frozen=True)
-class AccumulatedSpectrum:
-    """The mean of ``n_spectra`` consecutive complete spectra, with its bookkeeping.
-
-    Attributes
-    ----------
-    mean
-        Mean power per input and channel, float64, shape (n_inputs, n_channels).
-    n_spectra
-        Spectra averaged.
-    n_discarded
-        Complete spectra dropped at the start (``discard``).
-    n_stale
-        Complete spectra skipped because their integration ended before the request.
-    start_time, stop_time
-        Timestamps of the first and last averaged spectra (Unix seconds).
-    timestamps
-        Timestamp of every averaged spectrum, in arrival order.
-    requested_at
-        Clock time when the integration was asked for.
-    packets_lost, packets_duplicated, packets_malformed, heaps_dropped, packets_foreign
-        Counted while this integration ran (flush included).
-    """
-
-    mean: np.ndarray
-    n_spectra: int
-    n_discarded: int
-    n_stale: int
-    start_time: float
-    stop_time: float
-    timestamps: tuple[float, ...]
-    requested_at: float
-    packets_lost: int
-    packets_duplicated: int
-    packets_malformed: int
-    heaps_dropped: int
-    packets_foreign: int = 0
-
-
-@dataclass(frozen=True)
-class SpectrometerStatistics:
-    """Counters since :meth:`Spectrometer.connect` (a snapshot).
-
-    ``packets_received`` counts the source's datagrams only; ``packets_foreign`` those of
-    other senders, dropped unread.
-    """
-
-    packets_received: int = 0
-    packets_malformed: int = 0
-    packets_duplicated: int = 0
-    packets_late: int = 0
-    packets_flushed: int = 0
-    packets_lost: int = 0
-    spectra_completed: int = 0
-    heaps_dropped: int = 0
-    packets_foreign: int = 0
 
 
 class _Heap:

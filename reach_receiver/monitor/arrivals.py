@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from reach_receiver.devices.spectrometer import SpectrometerStatistics
+from reach_receiver.devices.spectra import SpectrometerStatistics
 
 from .access import Links
 

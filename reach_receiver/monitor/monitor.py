@@ -34,7 +34,8 @@ from pathlib import Path
 
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
-from reach_receiver.devices.spectrometer import Spectrometer, SpectrometerStatistics
+from reach_receiver.devices.spectra import SpectrometerStatistics
+from reach_receiver.devices.spectrometer import Spectrometer
 from reach_receiver.devices.tc08 import DEFAULT_PORTS, Tc08Reading
 from reach_receiver.errors import ReceiverError
 

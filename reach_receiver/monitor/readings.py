@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from reach_receiver.devices.board import FrontEndState
-from reach_receiver.devices.spectrometer import SpectrometerStatistics
+from reach_receiver.devices.spectra import SpectrometerStatistics
 from reach_receiver.devices.tc08 import Tc08Reading
 from reach_receiver.devices.tec_frames import TecStatus
 

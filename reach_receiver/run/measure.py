@@ -35,7 +35,7 @@ from reach_receiver.clock import Clock
 from reach_receiver.devices.board import DEVICE as FRONT_END
 from reach_receiver.devices.board import FrontEndState
 from reach_receiver.devices.protocols import ReflectionMeter, SpectraSource, Thermometer
-from reach_receiver.devices.spectrometer import AccumulatedSpectrum
+from reach_receiver.devices.spectra import AccumulatedSpectrum
 from reach_receiver.devices.tc08 import Tc08Reading
 from reach_receiver.devices.vna_settings import S11Measurement
 from reach_receiver.errors import DeviceError, ReceiverError
