@@ -503,7 +503,7 @@ except OSError:
     pass
 import ctypes
 import h5py, numpy, pyvisa, scipy.linalg, serial, usb.core, yaml
-from reach_receiver.schedule.lst import apparent_lst_h
+from calibration.core.sidereal import apparent_lst_h
 from reach_receiver.sim.tc08_standin import build_standin
 from reach_receiver.transports.tc08_library import load_libusbtc08
 

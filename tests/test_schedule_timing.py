@@ -8,16 +8,12 @@ import numpy as np
 import pytest
 from sites import planning_site
 
+from calibration.core.sidereal import apparent_lst_h
 from reach_receiver.devices.vna_settings import SweepSettings
 from reach_receiver.run import compile_text
 from reach_receiver.run import steps as s
 from reach_receiver.schedule.compile import ScheduleError
-from reach_receiver.schedule.lst import (
-    SIDEREAL_RATE,
-    apparent_lst_h,
-    local_sidereal_time_h,
-    next_utc_at_lst,
-)
+from reach_receiver.schedule.lst import SIDEREAL_RATE, local_sidereal_time_h, next_utc_at_lst
 from reach_receiver.schedule.timing import (
     estimated_duration_s,
     format_timeline,

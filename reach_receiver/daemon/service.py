@@ -33,13 +33,13 @@ import logging
 import threading
 import time
 
+from calibration.core.sidereal import load_tables
 from reach_receiver.clock import Clock, StopEvent
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.monitor import Monitor
 from reach_receiver.run.steps import STANDARD_KINDS
 from reach_receiver.run.summary import Truth
 from reach_receiver.schedule.kinds import KindRegistry
-from reach_receiver.schedule.lst import load_tables
 
 from .base import Directories
 from .control import SOCKET_FILE, ControlServer

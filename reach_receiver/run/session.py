@@ -38,6 +38,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from calibration.core.sidereal import apparent_lst_h
 from reach_receiver.clock import Clock
 from reach_receiver.config.site import SiteConfig
 from reach_receiver.disk import DiskFull
@@ -45,7 +46,6 @@ from reach_receiver.errors import ReceiverError
 from reach_receiver.monitor import Monitor
 from reach_receiver.schedule.compile import compile_schedule
 from reach_receiver.schedule.kinds import KindRegistry
-from reach_receiver.schedule.lst import apparent_lst_h
 from reach_receiver.schedule.steps import Schedule, Step
 from reach_receiver.schedule.timing import TimelineEntry, timeline
 from reach_receiver.store.parts import FILE_MODE, PARTS_DIR, StoreError, safe_name

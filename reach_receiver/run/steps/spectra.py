@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.core.sidereal import apparent_lst_h
 from reach_receiver.config.fields import Fields
 from reach_receiver.errors import ReceiverError
 from reach_receiver.frontend.layout import NOISE_SOURCE, REFERENCE_LOAD
-from reach_receiver.schedule.lst import apparent_lst_h
 from reach_receiver.schedule.parsing import ParseContext
 from reach_receiver.schedule.steps import Step, Where
 from reach_receiver.schedule.timing import TimingWalk, hms
