@@ -314,7 +314,7 @@ def test_errors_read_until_no_error(sim, vna):
 
 
 def test_unsupported_error_queue_reported_once_and_never_hangs(port, clock, caplog):
-    caplog.set_level(logging.WARNING, logger="reach_receiver.devices.vna")
+    caplog.set_level(logging.WARNING, logger="reach_receiver.devices.vna_link")
     with make_sim(port, clock, error_queue_supported=False) as sim:
         driver = make_vna(sim, clock)
         driver.connect()

@@ -23,20 +23,20 @@ SCPI used (Copper Mountain TRVNA software, socket server on port 5025; design.md
 
 Retry policy: a query that only reads is repeated once after a reconnect when the link
 drops, times out or returns garbage; a sweep is re-triggered from the start (never
-returned half-read); ``SENS1:CORR:COLL:SAVE`` is never repeated.
+returned half-read); ``SENS1:CORR:COLL:SAVE`` is never repeated. The link's rules
+(``*OPC?``, the error queue, the retry) are :mod:`reach_receiver.devices.vna_link`.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import re
 from collections.abc import Callable
-from typing import Protocol, TypeVar
+from typing import TypeVar
 
 import numpy as np
 
 from reach_receiver.clock import Clock, SystemClock
+from reach_receiver.devices.vna_link import MessageTransport, ScpiLink
 from reach_receiver.devices.vna_settings import (
     AVERAGES_RANGE,
     F_MAX_HZ,
@@ -53,9 +53,7 @@ from reach_receiver.devices.vna_settings import (
 )
 from reach_receiver.errors import (
     ConfigError,
-    ConnectionLost,
     DeviceError,
-    DeviceTimeout,
     ProtocolError,
 )
 from reach_receiver.transports.scpi import ScpiTransport
@@ -71,7 +69,6 @@ __all__ = [
     "STANDARDS",
     "ComplexArray",
     "FloatArray",
-    "MessageTransport",
     "S11Measurement",
     "ScpiErrorEntry",
     "SweepSettings",
@@ -84,45 +81,10 @@ T = TypeVar("T")
 
 STANDARDS = ("short", "open", "load")
 
-_RECOVERABLE = (ConnectionLost, DeviceTimeout, ProtocolError)
-_ERROR_REPLY = re.compile(r'^\s*([+-]?\d+)\s*,\s*"(.*)"\s*$')
 _STANDARD_NODE = {"short": "SHOR", "open": "OPEN", "load": "LOAD"}
-_MAX_ERROR_READS = 32
 
 
-class MessageTransport(Protocol):
-    """What the driver needs of a message channel (:class:`ScpiTransport` provides it)."""
-
-    def open(self) -> None:
-        """Connect."""
-        ...
-
-    def close(self) -> None:
-        """Disconnect."""
-        ...
-
-    def reconnect(self) -> None:
-        """Drop the link and open a fresh one."""
-        ...
-
-    def write(self, command: str) -> None:
-        """Send one command."""
-        ...
-
-    def query(self, command: str, timeout_s: float | None = None) -> str:
-        """Send a query and return its reply."""
-        ...
-
-    def query_floats(self, command: str, timeout_s: float | None = None) -> FloatArray:
-        """Send a query and parse its comma-separated numbers."""
-        ...
-
-    def query_long(self, command: str, timeout_s: float, poll_s: float = 0.1) -> str:
-        """Query whose reply follows a long operation."""
-        ...
-
-
-class Vna:
+class Vna(ScpiLink):
     """Driver of the Copper Mountain TR1300/1 over SCPI.
 
     Parameters
@@ -404,75 +366,7 @@ class Vna:
         self.settings = self.read_settings()
         return self.settings
 
-    # --- error queue --------------------------------------------------------------------
-    @property
-    def error_queue_supported(self) -> bool | None:
-        """True or False once known; None before the first ``SYST:ERR?``."""
-        return self._error_queue
-
-    def errors(self) -> list[ScpiErrorEntry]:
-        """Read ``SYST:ERR?`` until ``0,"No error"`` (at most 32 entries).
-
-        An instrument that does not answer (or answers something else before ever giving
-        a well-formed reply) is marked as having no error queue: this is logged once and
-        the query is not sent again.
-        """
-        if self._error_queue is False:
-            return []
-        entries: list[ScpiErrorEntry] = []
-        for _ in range(_MAX_ERROR_READS):
-            try:
-                reply = self._transport.query("SYST:ERR?", self.error_query_timeout_s)
-            except DeviceTimeout:
-                if self._error_queue:
-                    raise
-                self._mark_queue_unsupported("no reply")
-                self._transport.reconnect()
-                return entries
-            match = _ERROR_REPLY.match(reply)
-            if match is None:
-                if self._error_queue:
-                    raise ProtocolError(self.name, f"bad error entry {reply!r}", "SYST:ERR?")
-                self._mark_queue_unsupported(f"reply {reply!r}")
-                return entries
-            self._error_queue = True
-            code = int(match.group(1))
-            if code == 0:
-                return entries
-            entries.append(ScpiErrorEntry(code, match.group(2)))
-        log.warning("%s: error queue not empty after %d reads", self.name, _MAX_ERROR_READS)
-        return entries
-
-    # --- helpers ------------------------------------------------------------------------
-    def _mark_queue_unsupported(self, why: str) -> None:
-        self._error_queue = False
-        log.warning("%s: error queue unsupported (SYST:ERR? gave %s)", self.name, why)
-
-    def _raise_on_errors(self, command: str) -> None:
-        errors = self.errors()
-        if errors:
-            message = f"instrument reported: {', '.join(map(str, errors))}"
-            raise DeviceError(self.name, message, command)
-
-    def _command(self, command: str, timeout_s: float | None = None) -> None:
-        self._transport.write(command)
-        self._wait_opc(self.timeout_s if timeout_s is None else timeout_s)
-
-    def _wait_opc(self, timeout_s: float) -> None:
-        reply = self._transport.query_long("*OPC?", timeout_s)
-        if reply.strip().lstrip("+") != "1":
-            raise ProtocolError(self.name, f"unexpected reply {reply!r}", "*OPC?")
-
-    def _query_number(self, command: str) -> float:
-        reply = self._transport.query(command)
-        try:
-            value = float(reply)
-        except ValueError as err:
-            raise ProtocolError(self.name, f"not a number: {reply!r}", command) from err
-        if not np.isfinite(value):
-            raise ProtocolError(self.name, f"not finite: {reply!r}", command)
-        return value
-
+    # --- sweeps ------------------------------------------------------------------------
     def _sweep_timeout_s(self, settings: SweepSettings) -> float:
         return self.sweep_time_factor * settings.nominal_duration_s() + self.opc_margin_s
 
@@ -493,21 +387,6 @@ class Vna:
             message = "frequency grid is not the configured one (settings changed?)"
             raise ProtocolError(self.name, message, "SENS1:FREQ:DATA?")
         return data[0::2] + 1j * data[1::2]
-
-    def _retry(self, what: str, operation: Callable[[], T]) -> T:
-        """Run ``operation``; after a drop, timeout or garbled reply reconnect and run it again."""
-        try:
-            return operation()
-        except _RECOVERABLE as err:
-            log.warning("%s: %s failed (%s); reconnecting and retrying once", self.name, what, err)
-            self._transport.reconnect()
-        try:
-            return operation()
-        except (DeviceTimeout, ProtocolError):
-            # Leave no late or partial reply behind for the next command to read.
-            with contextlib.suppress(ConnectionLost):
-                self._transport.reconnect()
-            raise
 
 
 def _compare(wanted: SweepSettings, actual: SweepSettings) -> list[tuple[str, str]]:
