@@ -24,7 +24,8 @@ corrected data are ``G = (m - e00) / (e10e01 + e11 (m - e00))``
 Faults on demand (:meth:`VnaSimulator.inject`): no reply, garbled reply, truncated data,
 connection drop before or in the middle of a reply, a queued SCPI error; and a mode in
 which ``SYST:ERR?`` is an unknown command (unknown queries get no reply, as on SCPI
-instruments, and queue ``-113,"Undefined header"``).
+instruments, and queue ``-113,"Undefined header"``). The SCPI's forms, ranges and reply
+formats, and the state ``MMEM:STOR`` saves, are :mod:`reach_receiver.sim.vna_scpi`.
 """
 
 from __future__ import annotations
@@ -33,30 +34,38 @@ import contextlib
 import copy
 import enum
 import logging
-import re
 import socket
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from calibration.core.errors import CalibrationError
 from calibration.rf.cal_kit import IDEAL_KIT
-from calibration.rf.one_port import OnePortTerms, solve_one_port
+from calibration.rf.one_port import solve_one_port
 from reach_receiver.clock import Clock
 from reach_receiver.sim.vna_model import ComplexArray, ErrorModel, sweep_duration_s
+from reach_receiver.sim.vna_scpi import (
+    IFBW_STEPS_HZ,
+    ChannelState,
+    ascii_values,
+    clip,
+    flag,
+    interleave,
+    nearest,
+    normalise_header,
+    power_level,
+)
 from reach_receiver.transports.scpi import socket_address
 
 __all__ = [
-    "IFBW_STEPS_HZ",
     "ComplexArray",
     "ErrorModel",
     "Fault",
     "Reflection",
     "VnaSimulator",
-    "normalise_header",
     "solve_one_port",
     "sweep_duration_s",
 ]
@@ -65,16 +74,6 @@ log = logging.getLogger(__name__)
 
 Reflection = Callable[[NDArray[np.float64]], NDArray[np.complex128]]
 _STANDARDS = ("SHOR", "OPEN", "LOAD")  # the order of calibration.rf.cal_kit.STANDARD_NAMES
-_LONG_FORMS = {
-    "SENSE": "SENS", "FREQUENCY": "FREQ", "START": "STAR", "SWEEP": "SWE", "POINTS": "POIN",
-    "BWIDTH": "BWID", "SOURCE": "SOUR", "POWER": "POW", "AVERAGE": "AVER", "COUNT": "COUN",
-    "CALCULATE": "CALC", "TRACE": "TRAC", "TRIGGER": "TRIG", "SEQUENCE": "SEQ",
-    "SINGLE": "SING", "SYSTEM": "SYST", "ERROR": "ERR", "CORRECTION": "CORR", "STATE": "STAT",
-    "COLLECT": "COLL", "METHOD": "METH", "SHORT": "SHOR", "MMEMORY": "MMEM", "STORE": "STOR",
-    "STYPE": "STYP", "PARAMETER": "PAR", "DEFINE": "DEF",
-}  # fmt: skip
-_CHANNELLED = {"SENS", "SOUR", "CALC"}
-IFBW_STEPS_HZ = (10.0, 30.0, 100.0, 300.0, 1e3, 3e3, 1e4, 3e4)
 
 
 class Fault(enum.Enum):
@@ -93,43 +92,6 @@ class _Armed:
     fault: Fault
     header: str | None
     remaining: int
-
-
-@dataclass
-class _State:
-    """What ``MMEM:STOR`` saves: the channel settings and, for CST, the calibration."""
-
-    start_hz: float = 40e6
-    stop_hz: float = 180e6
-    points: int = 201
-    ifbw_hz: float = 1e3
-    power_dbm: float = -5.0
-    averaging: bool = False
-    average_count: int = 1
-    trigger_source: str = "INT"
-    trigger_averaging: bool = False
-    correction: bool = False
-    cal_freq_hz: NDArray[np.float64] | None = None
-    cal_terms: OnePortTerms | None = None
-    collected: dict[str, ComplexArray] = field(default_factory=dict)
-
-    def freq_hz(self) -> NDArray[np.float64]:
-        return np.linspace(self.start_hz, self.stop_hz, self.points)
-
-
-def normalise_header(header: str) -> str:
-    """Short-form upper-case header, root channel suffix made explicit: ``SENS1:FREQ:STAR``."""
-    nodes: list[str] = []
-    for node in header.strip().lstrip(":").upper().split(":"):
-        match = re.fullmatch(r"(\*?[A-Z]+)(\d*)(\??)", node)
-        if match is None:
-            return header.strip().upper()
-        name, suffix, query = match.groups()
-        name = _LONG_FORMS.get(name, name)
-        if not nodes and name in _CHANNELLED and not suffix:
-            suffix = "1"
-        nodes.append(f"{name}{suffix}{query}")
-    return ":".join(nodes)
 
 
 class VnaSimulator:
@@ -178,8 +140,8 @@ class VnaSimulator:
         self.idn = idn
         self.triggers = 0
         self.store_type = "STAT"
-        self._state = _State()
-        self._saved: dict[str, _State] = {}
+        self._state = ChannelState()
+        self._saved: dict[str, ChannelState] = {}
         self._errors: list[tuple[int, str]] = []
         self._faults: list[_Armed] = []
         self._busy_until = clock.now()
@@ -345,16 +307,16 @@ class VnaSimulator:
             "SENS1:FREQ:STAR": lambda: self._set_freq(start=float(arg)),
             "SENS1:FREQ:STOP": lambda: self._set_freq(stop=float(arg)),
             "SENS1:SWE:POIN": lambda: self._set_grid(points=int(float(arg))),
-            "SENS1:BWID": lambda: setattr(s, "ifbw_hz", _nearest(float(arg), IFBW_STEPS_HZ)),
-            "SOUR1:POW": lambda: setattr(s, "power_dbm", _power(float(arg))),
-            "SENS1:AVER": lambda: setattr(s, "averaging", _flag(arg)),
-            "SENS1:AVER:COUN": lambda: setattr(s, "average_count", int(_clip(int(arg), 1, 999))),
+            "SENS1:BWID": lambda: setattr(s, "ifbw_hz", nearest(float(arg), IFBW_STEPS_HZ)),
+            "SOUR1:POW": lambda: setattr(s, "power_dbm", power_level(float(arg))),
+            "SENS1:AVER": lambda: setattr(s, "averaging", flag(arg)),
+            "SENS1:AVER:COUN": lambda: setattr(s, "average_count", int(clip(int(arg), 1, 999))),
             "TRIG:SOUR": lambda: setattr(s, "trigger_source", arg.upper()[:3]),
-            "TRIG:SEQ:AVER": lambda: setattr(s, "trigger_averaging", _flag(arg)),
+            "TRIG:SEQ:AVER": lambda: setattr(s, "trigger_averaging", flag(arg)),
             "CALC1:PAR:COUN": lambda: None,
             "CALC1:PAR1:DEF": lambda: None,
             "SENS1:CORR:COLL:CKIT": lambda: None,
-            "SENS1:CORR:STAT": lambda: setattr(s, "correction", _flag(arg) and self._has_cal()),
+            "SENS1:CORR:STAT": lambda: setattr(s, "correction", flag(arg) and self._has_cal()),
             "SENS1:CORR:COLL:METH:SOLT1": lambda: s.collected.clear(),
             "SENS1:CORR:COLL:SAVE": self._save_cal,
             "TRIG:SEQ:SING": self._trigger,
@@ -378,8 +340,8 @@ class VnaSimulator:
             "TRIG:SOUR?": lambda: s.trigger_source,
             "TRIG:SEQ:AVER?": lambda: str(int(s.trigger_averaging)),
             "SENS1:CORR:STAT?": lambda: str(int(s.correction)),
-            "SENS1:FREQ:DATA?": lambda: _ascii(self._trace_data()[0]),
-            "CALC1:TRAC1:DATA:SDAT?": lambda: _ascii(_interleave(self._trace_data()[1])),
+            "SENS1:FREQ:DATA?": lambda: ascii_values(self._trace_data()[0]),
+            "CALC1:TRAC1:DATA:SDAT?": lambda: ascii_values(interleave(self._trace_data()[1])),
         }
         if self.error_queue_supported:
             queries["SYST:ERR?"] = self._pop_error
@@ -394,17 +356,17 @@ class VnaSimulator:
     def _set_freq(self, start: float | None = None, stop: float | None = None) -> None:
         s = self._state
         if start is not None:
-            s.start_hz = _clip(start, 3e5, 1.3e9 - 1)
+            s.start_hz = clip(start, 3e5, 1.3e9 - 1)
             s.stop_hz = max(s.stop_hz, s.start_hz + 1)
         if stop is not None:
-            s.stop_hz = _clip(stop, 3e5 + 1, 1.3e9)
+            s.stop_hz = clip(stop, 3e5 + 1, 1.3e9)
             s.start_hz = min(s.start_hz, s.stop_hz - 1)
         self._set_grid()
 
     def _set_grid(self, points: int | None = None) -> None:
         s = self._state
         if points is not None:
-            s.points = int(_clip(points, 2, 16001))
+            s.points = int(clip(points, 2, 16001))
         grid_changed = s.cal_freq_hz is None or s.cal_freq_hz.shape != (s.points,)
         if not grid_changed and s.cal_freq_hz is not None:
             grid_changed = not np.allclose(s.cal_freq_hz, s.freq_hz(), rtol=0, atol=0.5)
@@ -506,30 +468,3 @@ def _shut(sock: socket.socket) -> None:
     sock.close()
 
 
-def _flag(arg: str) -> bool:
-    value = arg.strip().upper()
-    if value in ("1", "ON"):
-        return True
-    if value in ("0", "OFF"):
-        return False
-    raise ValueError(arg)
-
-
-def _clip(value: float, low: float, high: float) -> float:
-    return min(max(value, low), high)
-
-
-def _nearest(value: float, steps: tuple[float, ...]) -> float:
-    return min(steps, key=lambda step: abs(np.log(step / value)))
-
-
-def _power(value: float) -> float:
-    return round(_clip(value, -55.0, 3.0) / 0.05) * 0.05
-
-
-def _interleave(data: ComplexArray) -> NDArray[np.float64]:
-    return np.column_stack([data.real, data.imag]).ravel()
-
-
-def _ascii(values: NDArray[np.float64]) -> str:
-    return ",".join(f"{v:.10e}" for v in values)
