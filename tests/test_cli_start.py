@@ -61,14 +61,16 @@ def test_help_and_version_import_nothing_heavy(main, argv):
 #: reach-cal's parsers: the package, its constants and errors, and the cli's parser modules
 #: (with the kit file's format, text that import's --help prints).
 CAL_PARSER = ("calibration.core.errors", "calibration.cli", "calibration.cli.main",
-              "calibration.cli.args", "calibration.cli.import_parser", "calibration.rf",
+              "calibration.cli.args", "calibration.cli.import_parser",
+              "calibration.cli.season_parser", "calibration.rf",
               "calibration.rf.kit_format")
 
 
 @pytest.mark.parametrize("argv", [
     ["--help"], ["--version"], [], ["solve", "--help"], ["simulate", "--help"],
     ["validate", "--help"], ["report", "--help"], ["import", "edges", "--help"],
-    ["import", "vna", "--help"], ["solve", "run.h5"],
+    ["import", "vna", "--help"], ["solve", "run.h5"], ["season", "--help"],
+    ["export", "--help"], ["season", "run.h5"],
 ])
 def test_reach_cal_parses_before_it_imports_the_engine(argv):
     code = PROBE.format(module="calibration.cli", main="main", argv=argv, heavy=HEAVY,

@@ -15,6 +15,8 @@
     reach-cal import vna DIR -o OUT_DIR --devices a,b,...
     reach-cal validate RUN.h5 --leave-one-out [...]
     reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
+    reach-cal season RUNS... -o SEASON.h5 [--lst-bin-h H]   (cli.season_parser)
+    reach-cal export --format gsdata SEASON.h5 -o OUT.gsh5
 
 Files are those of :mod:`calibration.io.hdf5_io`. No command writes over one of its inputs or
 a file holding measurements (:mod:`calibration.cli.files`); every numeric option is
@@ -25,7 +27,8 @@ on stderr without a traceback and exit with status 2, as do usage errors; succes
 
 Parsing imports nothing of the engine (:mod:`calibration.cli.args`): ``--help`` and
 ``--version`` answer at once, and a command's module (:mod:`.simulate`, :mod:`.solve`,
-:mod:`.apply`, :mod:`.summary`, :mod:`.validate`, :mod:`.report`, :mod:`.import_commands`)
+:mod:`.apply`, :mod:`.summary`, :mod:`.validate`, :mod:`.report`, :mod:`.import_commands`,
+:mod:`.season`, :mod:`.export`)
 is imported when it runs.
 """
 
@@ -55,6 +58,7 @@ from .args import (
     positive_int,
 )
 from .import_parser import add_import_command
+from .season_parser import add_season_commands
 
 PROG = "reach-cal"
 #: The most Monte-Carlo refits ``apply --vna-accuracy`` makes (64 is typical).
@@ -214,6 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--top", type=positive_int, default=5, help="evidence-table rows to show (>= 1, default 5)"
     )
     add_import_command(sub)
+    add_season_commands(sub)
 
     validate = command("validate")
     validate.add_argument("run", help="run file (HDF5)")

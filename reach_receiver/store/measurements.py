@@ -17,7 +17,11 @@ Contents of the measurement kinds (each becomes ``/measurements/NNNNNN_<kind>_<n
     check        attrs passed, details (JSON); one dataset per array (units from its name)
     solution     solution/ (the engine's solution layout); attr verification (JSON)
     calibrated   frequencies (Hz), mean (K), std (K), flags (1), lower_68, upper_68,
-                 lower_95, upper_95 (K; the credible intervals' ends)
+                 lower_95, upper_95 (K; the credible intervals' ends); std_calibration,
+                 std_radiometer (K: the solution's error, shared by every spectrum it
+                 calibrates, and the radiometer noise, independent per spectrum; the
+                 rest of std is the S11s' trace noise); attr handover (JSON: the cycle
+                 and S11s used)
     event        attrs event, message
 
 Names of S11 measurements are source names (REACH names) and ``lna`` for the receiver.
@@ -270,11 +274,14 @@ class MeasurementWriters:
     def add_calibrated(
         self, name: str, freq_hz: Any, mean: Any, std: Any, flags: Any, *, timestamp: float,
         intervals: Mapping[str, Any] | None = None,
+        errors: Mapping[str, Any] | None = None, handover: HandOver | None = None,
     ) -> None:
         """Store a calibrated spectrum: mean, standard deviation (K) and channel flags.
 
         ``intervals``: the credible intervals' ends by name (K; ``lower_68``, ``upper_68``,
-        ...), what the std alone does not give for a model-averaged solution.
+        ...), what the std alone does not give for a model-averaged solution. ``errors``:
+        parts of the std by name (K; ``std_calibration``, ``std_radiometer``), which a
+        season's average needs apart; ``handover``: the cycle and S11s calibrated.
         """
 
         def fill(f: Any) -> None:
@@ -282,8 +289,10 @@ class MeasurementWriters:
             dataset(f, "mean", np.asarray(mean, dtype=float), UNITS_K)
             dataset(f, "std", np.asarray(std, dtype=float), UNITS_K)
             dataset(f, "flags", np.asarray(flags, dtype=bool), UNITS_NONE)
-            for key, values in (intervals or {}).items():
+            for key, values in {**(intervals or {}), **(errors or {})}.items():
                 dataset(f, key, np.asarray(values, dtype=float), UNITS_K)
+            if handover is not None:
+                f.attrs["handover"] = handover.to_json()
 
         self._add("calibrated", name, timestamp, fill)
 

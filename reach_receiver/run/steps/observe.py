@@ -7,7 +7,9 @@ step's ``test_load_check`` would). With a solution from an earlier ``calibrate``
 each cycle is calibrated at once, through the store's hand-over with that one cycle and
 the latest S11s, over the solution's band, and its RFI channels flagged by the engine's
 flagger (:func:`calibration.checks.rfi.flag_sky`: its noise level follows the sky's); the
-calibrated spectrum is stored as ``<source>_<cycle>``.
+calibrated spectrum is stored as ``<source>_<cycle>``, with its error's parts (the
+solution's, shared by every spectrum it calibrates; the radiometer's, independent per
+spectrum) and the hand-over it used, which a season's average keeps apart.
 """
 
 from __future__ import annotations
@@ -54,14 +56,19 @@ def calibrate_cycle(run: RunContext, source: str, number: int, name: str, thresh
         log.warning("observe: %s not calibrated (%s)", name, "; ".join(view.handover.warnings))
         return
     layout = view.layout
+    data = view.others[source]
     spectrum = solution.calibrate(
-        layout.freq_hz, layout.gamma_rec, view.others[source], layout.channel_width_hz,
-        layout.gamma_rec_std,
+        layout.freq_hz, layout.gamma_rec, data, layout.channel_width_hz, layout.gamma_rec_std,
     )
+    radiometer = solution.calibrate(  # without the S11s' trace noise (shared by cycles)
+        layout.freq_hz, layout.gamma_rec, dataclasses.replace(data, gamma_std=None),
+        layout.channel_width_hz,
+    ).std_measurement
     flags = flag_sky(spectrum.mean, threshold)
     run.store.add_calibrated(
         name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now(),
-        intervals=spectrum.intervals(),
+        intervals=spectrum.intervals(), handover=view.handover,
+        errors={"std_calibration": spectrum.std_calibration, "std_radiometer": radiometer},
     )
     log.info("observe: %s calibrated, %d channels flagged", name, flags.sum())
 
