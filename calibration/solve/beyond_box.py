@@ -33,12 +33,16 @@ def beyond_box(
     search: bool,
     metadata: dict[str, object],
     warnings: list[str],
+    grew: bool = False,
 ) -> tuple[LinearPosterior, PolynomialBasis, float]:
     """The posterior and basis after :func:`~calibration.solve.delay_terms.extend`, inflated.
 
     The factor the covariance is to be inflated by for the misfit that remains is applied
     by the caller after the identifiability check, which asks what the calibrators
-    determine, not how well the model fits.
+    determine, not how well the model fits. ``grew``: the automatic box was raised past
+    its start, as a ripple of a few periods makes it (at a 40 MHz period over 80 MHz the
+    search stopped at 8-12 terms, inside its box, with its error 0.6-3x its error bar):
+    the delays are tried as where the search ended at its ceiling.
     """
     terms = data.terms()
     temps, q, var_q = data.stacked()
@@ -68,7 +72,7 @@ def beyond_box(
                 correlation)
     ext = extend(
         rows, theta, posterior.mean.size, data.freq_hz, basis, scale_prior, relinearise,
-        search, at_ceiling=bool(metadata.get("orders_at_ceiling")),
+        search, at_ceiling=grew or bool(metadata.get("orders_at_ceiling")),
         noise_scale=float(posterior.noise_variance),
     )
     if ext is None:

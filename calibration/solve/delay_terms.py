@@ -17,18 +17,24 @@ periods over the band: the order search runs to its ceiling and, at a 10 MHz per
    ``P`` coefficients). Averaging over channels beats the per-channel noise down, so a
    ripple well below it shows. An excess beyond :data:`EXCESS_SIGMA` standard deviations
    (``sqrt(2 dof)``) is structure the model does not hold.
-2. **Delays.** Candidates are the peaks of the residuals' periodogram
-   (``sum_i |FFT_f(w_i r_i)|^2``, delays above 1.5 / band: slower structure is the
-   polynomials' own). For each, with ``K`` polynomial terms, every parameter gets
-   ``cos``/``sin(2 pi nu tau)`` (:class:`~calibration.model.basis.DelayBasis`); the evidence of
-   that model under the fixed wide prior (eq. 3.35) is set against the best polynomial
-   model under the same prior, over ``K``. A delay model is kept only where its evidence
+2. **Delays.** Candidates are the peaks of periodograms (delays above 1.5 / band: slower
+   structure is the polynomials' own) of the residuals of the search's fit and of a fit
+   at the box's starting size (:data:`START_TERMS`: a box grown to 16 terms holds part
+   of a ripple of a few periods, and its residuals then point elsewhere): the rows'
+   (``sum_i |FFT_f(w_i r_i)|^2``) and the noise waves' own, solved channel by channel
+   (:func:`parameter_candidates`; the rows' are turned by each calibrator's cable). For
+   each, with ``K`` polynomial terms, every parameter gets ``cos``/``sin(2 pi nu tau)``
+   (:class:`~calibration.model.basis.DelayBasis`); the evidence of that model under the
+   fixed wide prior (eq. 3.35) is set against the best polynomial model under the same
+   prior, over ``K``. The best candidate's delay is refined by the evidence and ``K``
+   chosen again there (:func:`refined`). A delay model is kept only where its evidence
    exceeds the polynomials' by :data:`MIN_GAIN_NATS`; up to :data:`MAX_DELAYS` delays.
    Where the order search ended at its ceiling the delays are tried even if the test
-   passes (a slow ripple the polynomials hold only with every term they have).
+   passes (a slow ripple the polynomials hold only with every term they have). The
+   delay's own uncertainty is carried into the posterior (:func:`marginal_model`).
 3. **What remains.** If the test still fails, the posterior's scale is multiplied by
-   ``chi2_bin / dof`` (its error bars carry the misfit that remains, spread over the
-   band) and a warning says so.
+   ``chi2_bin / dof`` beyond the fitted ``s^2`` (its error bars carry the misfit that
+   remains, spread over the band) and a warning says so.
 """
 
 from __future__ import annotations
@@ -61,6 +67,11 @@ MAX_DELAYS = 2
 CANDIDATES = 3
 #: Polynomial terms tried beside the delays.
 POLYNOMIAL_TERMS = tuple(range(3, 13))
+#: Polynomial terms of the fit whose residuals also propose delays: the automatic box's
+#: start (``model_fit.DEFAULT_MAX_ORDERS``), before its growth absorbs part of a ripple.
+START_TERMS = 8
+#: Rounds of a delay's refinement and its polynomial terms' choice (:func:`refined`).
+REFINE_ROUNDS = 4
 #: Gauss-Newton steps about a delay model's curves.
 RELINEARISE = 2
 
@@ -125,7 +136,39 @@ def candidate_delays(
     """Delays (s) of the residuals' largest periodogram peaks (module docstring)."""
     residual = rows.response - np.einsum("mnk,kn->mn", rows.features, theta)
     u = rows.weights * residual
-    u = u / np.sqrt(np.sum(rows.weights, axis=1, keepdims=True))
+    return _peaks(u / np.sqrt(np.sum(rows.weights, axis=1, keepdims=True)), freq_hz, exclude)
+
+
+def parameter_candidates(
+    rows: Rows, theta: FloatArray, freq_hz: FloatArray, exclude: tuple[float, ...] = ()
+) -> list[float]:
+    """Delays (s) of the largest periodogram peaks of the residual *noise waves*.
+
+    A ripple on ``T_cos`` reaches calibrator ``i``'s rows through ``X_cos``, whose phase
+    turns with that calibrator's own cable, so the rows' periodogram peaks at the sums
+    and differences of the two delays (a 50 ns ripple was proposed at 28 and 128 ns).
+    Solved channel by channel for the five parameters (``M >= 5`` calibrators), the
+    residual is the parameters' own: each parameter's residual curve, scaled by its
+    median sd over channels (a constant, which does not modulate it), proposes delays.
+    ``[]`` with fewer than five calibrators.
+    """
+    f, w = rows.features, rows.weights
+    if f.shape[0] < f.shape[2]:
+        return []
+    residual = rows.response - np.einsum("mnk,kn->mn", f, theta)
+    gram = np.einsum("mnk,mn,mnl->nkl", f, w, f)
+    rhs = np.einsum("mnk,mn->nk", f, w * residual)
+    try:
+        delta = np.linalg.solve(gram, rhs[..., None])[..., 0]  # (N, 5)
+        sd = np.sqrt(np.abs(np.diagonal(np.linalg.inv(gram), axis1=1, axis2=2)))
+    except np.linalg.LinAlgError:
+        return []
+    scale = np.median(sd, axis=0)
+    return _peaks((delta / np.where(scale > 0, scale, 1.0)).T, freq_hz, exclude)
+
+
+def _peaks(u: FloatArray, freq_hz: FloatArray, exclude: tuple[float, ...]) -> list[float]:
+    """The :data:`CANDIDATES` largest peaks of ``sum_i |FFT(u_i)|^2`` over delay."""
     n = u.shape[1]
     pad = 8 * n
     power = np.sum(np.abs(np.fft.rfft(u, n=pad, axis=1)) ** 2, axis=0)
@@ -144,6 +187,16 @@ def candidate_delays(
         found.append(float(delays[k]))
         power[np.abs(delays - delays[k]) < resolution] = 0.0
     return found
+
+
+def _union(lists: list[list[float]], resolution: float) -> list[float]:
+    """The candidates of every list, in turn, those within ``resolution`` of one kept once."""
+    out: list[float] = []
+    for group in lists:
+        for tau in group:
+            if all(abs(tau - t) >= resolution for t in out):
+                out.append(tau)
+    return out
 
 
 @dataclass
@@ -192,38 +245,120 @@ def _with_delays(
 
 def best_model(
     rows: Rows, freq_hz: FloatArray, poly: PolynomialBasis, delays: tuple[float, ...],
-    scale_prior: ScalePrior | None,
+    scale_prior: ScalePrior | None, refine: bool = True,
 ) -> DelayModel | None:
     """The best model over :data:`POLYNOMIAL_TERMS` (with ``delays``, or none).
 
-    With delays, the last one is then refined by the evidence at that number of
-    polynomial terms, within a quarter of the band's delay resolution of where it was
-    (the periodogram's grid is an eighth of it: a delay off by that leaves a ripple of a
-    few per cent of its amplitude, far above the noise of a long integration).
+    With delays and ``refine``, the last one is then refined by the evidence
+    (:func:`refined`).
     """
     best: DelayModel | None = None
     for k in POLYNOMIAL_TERMS:
         model = _with_delays(rows, freq_hz, poly, delays, k, scale_prior)
         if model is not None and (best is None or model.log_evidence > best.log_evidence):
             best = model
-    if best is None or not delays:
+    if best is None or not delays or not refine:
         return best
-    k = best.basis.polynomial_terms if isinstance(best.basis, DelayBasis) else 0
-    tau = delays[-1]
+    return refined(rows, freq_hz, poly, best, scale_prior)
+
+
+def refined(
+    rows: Rows, freq_hz: FloatArray, poly: PolynomialBasis, model: DelayModel,
+    scale_prior: ScalePrior | None,
+) -> DelayModel:
+    """``model``'s last delay refined by the evidence, then its polynomial terms again.
+
+    At the model's number of polynomial terms, within a quarter of the band's delay
+    resolution of where it was (the periodogram's grid is an eighth of it: a delay off by
+    that leaves a ripple of a few per cent of its amplitude, far above the noise of a long
+    integration); the terms are then chosen again at the refined delay (off the true
+    delay, more terms soak up what the ripple's misfit leaves), and the delay refined at
+    those, until the terms stay and the delay is inside its window (a candidate from the
+    noise waves' periodogram can be off by more than the window: 204 ns for a 200 ns
+    ripple stopped at the window's edge, 620 nats below the peak), at most
+    :data:`REFINE_ROUNDS` rounds.
+    """
     span = 0.25 / float(freq_hz[-1] - freq_hz[0])
+    for _ in range(REFINE_ROUNDS):
+        assert isinstance(model.basis, DelayBasis)
+        k, delays = model.basis.polynomial_terms, model.basis.delays_s
+        tau = delays[-1]
 
-    def cost(t: float) -> float:
-        model = _with_delays(rows, freq_hz, poly, (*delays[:-1], t), k, scale_prior)
-        return np.inf if model is None else -model.log_evidence
+        def cost(t: float, k: int = k, delays: tuple[float, ...] = delays) -> float:
+            fitted = _with_delays(rows, freq_hz, poly, (*delays[:-1], t), k, scale_prior)
+            return np.inf if fitted is None else -fitted.log_evidence
 
-    found = minimize_scalar(
-        cost, bounds=(max(tau - span, 1e-12), tau + span), method="bounded",
-        options={"xatol": 1e-4 * span},
-    )
-    refined = _with_delays(rows, freq_hz, poly, (*delays[:-1], float(found.x)), k, scale_prior)
-    if refined is not None and refined.log_evidence > best.log_evidence:
-        return refined
-    return best
+        found = minimize_scalar(
+            cost, bounds=(max(tau - span, 1e-12), tau + span), method="bounded",
+            options={"xatol": 1e-4 * span},
+        )
+        again = best_model(
+            rows, freq_hz, poly, (*delays[:-1], float(found.x)), scale_prior, refine=False
+        )
+        if again is None or again.log_evidence <= model.log_evidence:
+            return model
+        model = again
+        assert isinstance(model.basis, DelayBasis)
+        at_edge = abs(float(found.x) - tau) > 0.9 * span  # the peak lies further: go on
+        if model.basis.polynomial_terms == k and not at_edge:
+            return model
+    return model
+
+
+def delay_sd(
+    rows: Rows, freq_hz: FloatArray, poly: PolynomialBasis, model: DelayModel,
+    scale_prior: ScalePrior | None,
+) -> tuple[float, ...]:
+    """Each delay's posterior sd (s): Laplace's, from the evidence's curvature in it.
+
+    ``sd^-2 = -d^2 log Z / d tau^2`` by central differences at the model's own terms;
+    where the curvature is not negative (a delay the evidence does not bound) the band's
+    resolution stands in.
+    """
+    assert isinstance(model.basis, DelayBasis)
+    k, delays = model.basis.polynomial_terms, model.basis.delays_s
+    resolution = 1.0 / float(freq_hz[-1] - freq_hz[0])
+    h = 1e-2 * resolution
+    out = []
+    for j, tau in enumerate(delays):
+        z = []
+        for t in (tau - h, tau + h):
+            moved = (*delays[:j], t, *delays[j + 1 :])
+            fitted = _with_delays(rows, freq_hz, poly, moved, k, scale_prior)
+            z.append(-np.inf if fitted is None else fitted.log_evidence)
+        curvature = (2.0 * model.log_evidence - z[0] - z[1]) / h**2
+        out.append(float(1.0 / np.sqrt(curvature)) if curvature > 0 else resolution)
+    return tuple(out)
+
+
+def marginal_model(
+    rows: Rows, freq_hz: FloatArray, poly: PolynomialBasis, model: DelayModel,
+    scale_prior: ScalePrior | None,
+) -> tuple[DelayModel, tuple[float, ...]]:
+    """``model`` with its delays' own uncertainty carried, and those delays' sds.
+
+    A delay found by the evidence is known to ``sd`` (:func:`delay_sd`); the ripple's
+    curves at ``tau + d`` differ from those at ``tau`` by ``d`` times their derivative,
+    ``2 pi (nu - nu_c) A sin(...)``, which no column of the model holds, so a posterior
+    at the found delay alone is too sure of the ripple far from the band's centre (at a
+    20 MHz period and 0.3-3 K, 1.2-2x its error bars). Each delay becomes the pair
+    ``tau -+ sd``: their cos/sin columns span those at ``tau`` and the derivative's to
+    second order in ``sd``, so the fit (under the same wide prior) measures the shift
+    the data allow and the posterior carries it: the delay linearised and marginalised,
+    with a shift of its own per parameter. The pair's spacing is kept within
+    ``[1e-3, 0.25]`` of the band's delay resolution (columns apart enough to solve, close
+    enough for the expansion).
+    """
+    assert isinstance(model.basis, DelayBasis)
+    sds = delay_sd(rows, freq_hz, poly, model, scale_prior)
+    resolution = 1.0 / float(freq_hz[-1] - freq_hz[0])
+    pairs: list[float] = []
+    for tau, sd in zip(model.basis.delays_s, sds, strict=True):
+        h = float(np.clip(sd, 1e-3 * resolution, 0.25 * resolution))
+        pairs += [tau - h, tau + h]
+    k = model.basis.polynomial_terms
+    wide = _with_delays(rows, freq_hz, poly, tuple(pairs), k, scale_prior)
+    return (model if wide is None else wide), sds
 
 
 @dataclass
@@ -272,16 +407,29 @@ def extend(
     delays: tuple[float, ...] = ()
     current_rows, current_theta = rows, theta
     gains: list[float] = []
+    # The box's starting size sees a ripple before growth absorbs it (module docstring).
+    start = _fit_model(rows, freq_hz, poly, START_TERMS, scale_prior) if search else None
+    seen = [start.curves(freq_hz)] if start is not None else []
     for _ in range(MAX_DELAYS if search else 0):
         tried = []
-        for tau in candidate_delays(current_rows, current_theta, freq_hz, delays):
-            model = best_model(current_rows, freq_hz, poly, (*delays, tau), scale_prior)
+        for tau in _union(
+            [find(current_rows, t, freq_hz, delays)
+             for t in [current_theta, *seen]
+             for find in (parameter_candidates, candidate_delays)],
+            1.0 / float(freq_hz[-1] - freq_hz[0]),
+        ):
+            model = best_model(
+                current_rows, freq_hz, poly, (*delays, tau), scale_prior, refine=False
+            )
             # A model taking T_NS through zero has no operating point to relinearise about.
             if model is not None and np.all(model.curves(freq_hz)[INDEX["NS"]] > 0):
                 tried.append(model)
         if not tried:
             break
         model = max(tried, key=lambda m: m.log_evidence)
+        better = refined(current_rows, freq_hz, poly, model, scale_prior)
+        if np.all(better.curves(freq_hz)[INDEX["NS"]] > 0):
+            model = better
         base = kept if kept is not None else reference
         base_z = base.log_evidence if base is not None else -np.inf
         if model.log_evidence - base_z < MIN_GAIN_NATS:
@@ -301,6 +449,7 @@ def extend(
         if not np.all(model.curves(freq_hz)[INDEX["NS"]] > 0):
             break  # the refit took T_NS through zero: keep what was found before it
         kept, current_theta = model, model.curves(freq_hz)
+        seen = []
         assert isinstance(model.basis, DelayBasis)
         delays = model.basis.delays_s
         chi2_now, dof_now = binned_chi2(current_rows, current_theta, model.posterior.mean.size)
@@ -312,11 +461,13 @@ def extend(
         ext = Extension(None, chi2, dof, chi2, dof)
     else:
         after, dof_after = binned_chi2(current_rows, current_theta, kept.posterior.mean.size)
-        ext = Extension(kept, chi2, dof, after, dof_after)
+        marginal, sds = marginal_model(current_rows, freq_hz, poly, kept, scale_prior)
+        ext = Extension(marginal, chi2, dof, after, dof_after)
         assert isinstance(kept.basis, DelayBasis)
         periods = ", ".join(f"{1e-6 / d:.3g}" for d in kept.basis.delays_s)
         ext.metadata["delay_terms"] = {
             "delays_ns": [round(1e9 * d, 3) for d in kept.basis.delays_s],
+            "delay_sd_ns": [round(1e9 * d, 4) for d in sds],
             "polynomial_terms": kept.basis.polynomial_terms,
             "log_evidence_gain": [round(g, 2) for g in gains],
         }

@@ -409,6 +409,7 @@ def solve_radiometric(
         posterior, used_basis, inflation = beyond_box(
             data, posterior, basis, last.problem, prior.scale, choice.orders is None,
             metadata, warnings,
+            grew=any(m > n for m, n in zip(result.max_orders, choice.limits, strict=True)),
         )
         if used_basis is not basis:  # a delay model: it is the model used, not the search's
             best = posterior.orders
