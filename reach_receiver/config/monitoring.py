@@ -39,6 +39,12 @@ ALARM_KEYS = ("name", "metric", "labels", "above", "below", "hysteresis", "for_s
               "enabled")
 
 
+#: The drift check's statistic (:func:`reach_receiver.run.checks.compare_on_source`), one
+#: reading per calibration, and the name of its alarm.
+DRIFT_METRIC = "reach_calibration_drift_sigma"
+DRIFT_ALARM = "calibration drift"
+
+
 @dataclass(frozen=True)
 class AlarmRule:
     """A threshold on the series of one metric, with hysteresis."""
@@ -63,6 +69,12 @@ class AlarmRule:
 #: its alarm bounds what the electronics may see, not one setpoint: 10 to 40 C, for ten
 #: minutes, as the plate relaxes slowly (an 8-hour settling in the thesis' test) and a
 #: passing excursion needs nobody.
+#:
+#: A calibration drift is one test per calibration of the new solution against the
+#: previous one (:func:`reach_receiver.run.checks.compare_on_source`), stated in Gaussian
+#: sigma of its tail probability: 3.9 sigma is a false-alarm probability of 1e-4 per
+#: calibration, 0.3 % over a week of calibrations every 6 h; it clears when a later
+#: calibration agrees with its predecessor within 3 sigma.
 DEFAULT_ALARMS: tuple[AlarmRule, ...] = (
     AlarmRule("device silent", "reach_device_up", below=0.5, for_s=120.0),
     AlarmRule("tec fault", "reach_tec_fault_bits", above=0.5),
@@ -72,6 +84,7 @@ DEFAULT_ALARMS: tuple[AlarmRule, ...] = (
     AlarmRule("low disk", "reach_disk_free_bytes", below=5e9, hysteresis=1e9),
     AlarmRule("spectrometer loss", "reach_spectrometer_loss_ratio", above=1e-3,
               hysteresis=5e-4, severity="warn"),
+    AlarmRule(DRIFT_ALARM, DRIFT_METRIC, above=3.9, hysteresis=0.9, severity="warn"),
 )
 
 

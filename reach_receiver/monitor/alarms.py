@@ -23,6 +23,7 @@ killed), so a mail server that hangs never holds up the daemon; at most
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import math
 import queue
@@ -52,6 +53,7 @@ class Alarm:
     raised_at: float
     since: float = math.nan  # the first value out of range (``raised_at`` when not given)
     labels: Mapping[str, str] = field(default_factory=dict)
+    note: str = ""  # the latest reading's note (:attr:`Reading.note`)
 
     def __post_init__(self) -> None:
         if math.isnan(self.since):
@@ -65,7 +67,7 @@ class Alarm:
     def text(self, now: float | None = None) -> str:
         """The alarm in words at ``now`` (at the time it was raised by default)."""
         return wording.raised(self.rule, self.labels, self.value, self.since,
-                              self.raised_at if now is None else now)
+                              self.raised_at if now is None else now, self.note)
 
     @property
     def message(self) -> str:
@@ -105,8 +107,7 @@ class AlarmBoard:
                 if self._check(rule, reading):
                     worst = _worse(worst, ERROR if rule.severity == "error" else WARN)
             if worst != reading.status:
-                reading = Reading(reading.metric, reading.value, reading.unit,
-                                  reading.timestamp, worst, reading.labels)
+                reading = dataclasses.replace(reading, status=worst)
             out.append(reading)
         return out
 
@@ -126,6 +127,7 @@ class AlarmBoard:
         low = rule.below is not None and value < rule.below
         if raised is not None:
             raised.value = value
+            raised.note = reading.note
             inside_high = rule.above is None or value <= rule.above - rule.hysteresis
             inside_low = rule.below is None or value >= rule.below + rule.hysteresis
             if inside_high and inside_low:
@@ -139,7 +141,7 @@ class AlarmBoard:
         if t - since < rule.for_s:
             return False
         del self._onset[alarm_id]
-        alarm = Alarm(rule, reading.key, value, t, since, dict(reading.labels))
+        alarm = Alarm(rule, reading.key, value, t, since, dict(reading.labels), reading.note)
         self.active[alarm_id] = alarm
         self.history.append(("raised", alarm, t))
         log.warning("alarm raised: %s", alarm.message)
@@ -151,7 +153,8 @@ class AlarmBoard:
                unknown: bool = False) -> None:
         del self.active[alarm_id]
         self.history.append(("cleared", alarm, t))
-        text = wording.cleared(alarm.rule, alarm.labels, value, alarm.since, t, unknown)
+        text = wording.cleared(alarm.rule, alarm.labels, value, alarm.since, t, unknown,
+                               alarm.note)
         log.info("alarm cleared: %s [%s]", text, alarm.id)
         if self.hook is not None:
             self.hook.fire("cleared", alarm.rule.name, text, alarm.id)

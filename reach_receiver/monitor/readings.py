@@ -36,7 +36,9 @@ class Reading:
     """One reading of one series.
 
     ``value`` is NaN when the device answered but the value cannot be used (a
-    thermocouple flagged open or overflowing): its status then says why not.
+    thermocouple flagged open or overflowing): its status then says why not. ``note`` is
+    what the number alone does not say, for an alarm's text (a calibration drift's size
+    and band); it is not part of the series and is not stored.
     """
 
     metric: str
@@ -45,6 +47,7 @@ class Reading:
     timestamp: float
     status: str = NOMINAL
     labels: Mapping[str, str] = field(default_factory=dict)
+    note: str = ""
 
     @property
     def key(self) -> str:

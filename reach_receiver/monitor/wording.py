@@ -7,6 +7,9 @@ rule and its series' labels::
     TC-08 not answering for 5 min (since 14:02 UTC; threshold 2 min)
     enclosure 40.6 C above 40 C for 10 min (since 13:55 UTC)
     data disk 3.1 GB free, below 5 GB (since 09:12 UTC)
+    calibration drift on 'ant': +0.41 K (5.1 sigma) over 50.0-70.0 MHz against the
+        solution of 12:02 UTC; joint 6.3 sigma over 8 sub-bands (threshold 3.9 sigma;
+        since 18:05 UTC)
 
 and its clearing likewise (``TC-08 answering again after 7 min``). A rule of the site's
 own (not one of the defaults) has its name before the text: the operator's words for
@@ -21,7 +24,7 @@ import math
 from collections.abc import Mapping
 from datetime import datetime, timezone
 
-from reach_receiver.config.monitoring import DEFAULT_ALARMS, AlarmRule
+from reach_receiver.config.monitoring import DEFAULT_ALARMS, DRIFT_METRIC, AlarmRule
 
 _DEFAULT_NAMES = frozenset(rule.name for rule in DEFAULT_ALARMS)
 #: How each monitored device is called in text.
@@ -91,11 +94,18 @@ def quantity(metric: str, value: float) -> str:
 
 
 def raised(rule: AlarmRule, labels: Mapping[str, str], value: float, since: float,
-           now: float) -> str:
-    """The text of a raised alarm at ``now`` (its condition holding since ``since``)."""
+           now: float, note: str = "") -> str:
+    """The text of a raised alarm at ``now`` (its condition holding since ``since``).
+
+    ``note`` is the latest reading's own words (:attr:`Reading.note
+    <reach_receiver.monitor.readings.Reading.note>`), where a number alone says too little.
+    """
     what = subject(rule.metric, labels)
     when = clock_time(since, now)
     lasting = duration(now - since)
+    if rule.metric == DRIFT_METRIC:
+        found = note or f"joint {value:.1f} sigma"
+        return f"calibration drift {found} (threshold {rule.above:g} sigma; since {when})"
     if rule.metric == "reach_device_up":
         return (f"{what} not {_answering(labels)} for {lasting} (since {when}; "
                 f"threshold {duration(rule.for_s)})")
@@ -119,10 +129,13 @@ def raised(rule: AlarmRule, labels: Mapping[str, str], value: float, since: floa
 
 
 def cleared(rule: AlarmRule, labels: Mapping[str, str], value: float, since: float,
-            now: float, unknown: bool = False) -> str:
+            now: float, unknown: bool = False, note: str = "") -> str:
     """The text of an alarm's clearing at ``now``; ``unknown``: its series is no longer read."""
     what = subject(rule.metric, labels)
     lasted = duration(now - since)
+    if rule.metric == DRIFT_METRIC:
+        return (f"calibration drift over: the new solution agrees with the previous one "
+                f"(joint {value:.1f} sigma) after {lasted}")
     if unknown:
         return f"{what} no longer read (powered off or not brought up); alarm lasted {lasted}"
     if rule.metric == "reach_device_up":

@@ -13,18 +13,37 @@ their verdicts.
   polynomial coefficients depend on the basis and order, so the comparison is made on
   the parameters themselves, band-averaged: ``|<T_new> - <T_ref>| / |<T_ref>|`` for each
   of T_unc, T_cos, T_sin, T_NS, T_L.
+* **Drift** (:func:`compare_on_source`): a new solution against the previous one, on one
+  source's calibrated temperature. A tolerance on each parameter (the benchmark's) says
+  nothing of what the difference means for the sky; this check asks whether the two
+  solutions agree within their own credible intervals where it matters. The same
+  measured spectrum (``Q`` and the source's S11) is calibrated with both solutions
+  (eq. 3.27), so its radiometer noise is common and cancels: the difference
+  ``D(f) = T_new(f) - T_old(f)`` has, when nothing changed, the covariance of the two
+  posteriors' calibration errors added (independent runs). Those errors are smooth and
+  correlated over the band (a few polynomial terms), so a per-channel test is neither
+  independent nor honest; instead ``D`` is averaged over sub-bands (``d_b``, 5 MHz by
+  default), their covariance ``C = C_new + C_old`` taken from posterior draws of each
+  solution, and ``chi2 = d^T C^-1 d`` compared with a chi-square of as many degrees of
+  freedom as sub-bands: one test per calibration, of false-alarm probability ``p`` at its
+  threshold. The statistic is stated as the two-sided Gaussian sigma of the same tail
+  probability (``p = 1e-4`` is 3.9 sigma), the sub-bands beyond 2 sigma on their own give
+  the band, and the worst of them the size (K and sigma).
 
 RFI flags of calibrated spectra are the engine's (:func:`calibration.checks.rfi.flag_sky`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from calibration.model.noise_waves import PARAMETERS
+from calibration.solve.solution import CalibratedSpectrum
 from calibration.solve.solvers import NoiseWaveSolution
 
 FloatArray = NDArray[np.float64]
@@ -85,3 +104,150 @@ def compare_with_benchmark(
         name: float(abs(a - b) / abs(b)) for name, a, b in zip(PARAMETERS, new, old, strict=True)
     }
     return BenchmarkVerdict(max(differences.values()) <= tolerance, differences, tolerance)
+
+
+#: Posterior draws of each solution for the sub-bands' covariance (in blocks, for memory).
+DRIFT_DRAWS = 2000
+#: A sub-band beyond this many of its own sigma is part of the band a drift reports.
+BAND_SIGMA = 2.0
+
+
+def sigma_of(p_value: float) -> float:
+    """The two-sided Gaussian sigma of a tail probability (``1e-4`` -> 3.89)."""
+    return float(stats.norm.isf(max(p_value, 1e-300) / 2.0))
+
+
+@dataclass(frozen=True)
+class SubBand:
+    """One sub-band of the drift check: its edges, ``d_b`` and its standard deviation."""
+
+    lo_hz: float
+    hi_hz: float
+    difference_k: float
+    std_k: float
+
+    @property
+    def sigma(self) -> float:
+        """``d_b`` in its own standard deviations (signed)."""
+        return self.difference_k / self.std_k if self.std_k > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class DriftVerdict:
+    """A new solution against the previous one on one source (module docstring).
+
+    ``sigma`` is the joint statistic (``chi2`` on ``dof`` sub-bands, tail probability
+    ``p_value``) as a two-sided Gaussian sigma; ``band_hz`` the span of the sub-bands
+    beyond :data:`BAND_SIGMA` (the worst one when none is), ``size_k`` and
+    ``size_sigma`` the worst sub-band's difference (new minus old) and its own sigma.
+    """
+
+    sigma: float
+    chi2: float
+    dof: int
+    p_value: float
+    sub_bands: tuple[SubBand, ...]
+    band_hz: tuple[float, float]
+    size_k: float
+    size_sigma: float
+    matched_sigma: float = math.nan
+
+    def drifted(self, threshold_sigma: float) -> bool:
+        """Whether the joint statistic is beyond ``threshold_sigma``."""
+        return self.sigma > threshold_sigma
+
+    def describe(self) -> str:
+        """``0.412 K (5.1 sigma) over 50-70 MHz; joint 6.3 sigma over 8 sub-bands``."""
+        lo, hi = self.band_hz
+        return (f"{self.size_k:+.3g} K ({abs(self.size_sigma):.1f} sigma) over "
+                f"{lo / 1e6:.1f}-{hi / 1e6:.1f} MHz; joint {self.sigma:.1f} sigma over "
+                f"{self.dof} sub-bands")
+
+    def as_dict(self) -> dict[str, object]:
+        """The numbers, for a check record."""
+        return {
+            "sigma": self.sigma, "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
+            "band_lo_hz": self.band_hz[0], "band_hi_hz": self.band_hz[1],
+            "size_k": self.size_k, "size_sigma": self.size_sigma,
+            "matched_sigma": None if math.isnan(self.matched_sigma) else self.matched_sigma,
+            "sub_band_lo_hz": [b.lo_hz for b in self.sub_bands],
+            "sub_band_difference_k": [b.difference_k for b in self.sub_bands],
+            "sub_band_std_k": [b.std_k for b in self.sub_bands],
+        }
+
+
+def sub_band_masks(freq_hz: FloatArray, width_hz: float) -> list[NDArray[np.bool_]]:
+    """Contiguous sub-bands of about ``width_hz`` covering ``freq_hz`` (none empty)."""
+    f = np.asarray(freq_hz, dtype=float)
+    span = float(f[-1] - f[0]) if f.size > 1 else 0.0
+    n = max(1, min(round(span / width_hz), f.size))
+    edges = np.linspace(f[0], f[-1], n + 1)
+    index = np.clip(np.searchsorted(edges, f, side="right") - 1, 0, n - 1)
+    return [index == b for b in range(n) if np.any(index == b)]
+
+
+def _sub_band_draws(
+    spectrum: CalibratedSpectrum, average: FloatArray, n: int, rng: np.random.Generator
+) -> FloatArray:
+    """``(n, B)`` sub-band means (``average``: channels x sub-bands) of posterior draws."""
+    block = 250
+    return np.concatenate([
+        spectrum.draw_calibration(min(block, n - start), rng) @ average
+        for start in range(0, n, block)
+    ])
+
+
+def compare_on_source(
+    new: CalibratedSpectrum,
+    old: CalibratedSpectrum,
+    sub_band_hz: float = 5e6,
+    independent_variance: FloatArray | float = 0.0,
+    template: FloatArray | None = None,
+    draws: int = DRIFT_DRAWS,
+    seed: int = 0,
+) -> DriftVerdict:
+    """The drift test of module docstring on one measured spectrum calibrated twice.
+
+    ``new`` and ``old`` are the same spectrum (same channels) calibrated with the new and
+    the previous solution; ``independent_variance`` (K^2 per channel) is any further
+    difference independent between channels (the receiver's S11 measured twice);
+    ``template`` (K per channel), the shape an expected kind of drift gives the
+    difference, adds the matched test along it.
+    """
+    freq = np.asarray(new.freq_hz, dtype=float)
+    if old.freq_hz.shape != freq.shape or not np.allclose(old.freq_hz, freq):
+        raise ValueError("the two calibrated spectra must share their channels")
+    masks = sub_band_masks(freq, sub_band_hz)
+    average = np.stack([m / m.sum() for m in masks], axis=1)
+    d = np.asarray(new.mean - old.mean, dtype=float) @ average
+    rng = np.random.default_rng(seed)
+    cov = np.atleast_2d(np.cov(_sub_band_draws(new, average, draws, rng), rowvar=False))
+    cov = cov + np.atleast_2d(np.cov(_sub_band_draws(old, average, draws, rng), rowvar=False))
+    extra = np.broadcast_to(np.asarray(independent_variance, dtype=float), freq.shape)
+    cov = cov + np.diag([extra[m].sum() / m.sum() ** 2 for m in masks])
+    values, vectors = np.linalg.eigh(cov)
+    keep = values > values.max() * 1e-12 if values.max() > 0 else np.zeros(values.shape, bool)
+    basis = vectors[:, keep] / np.sqrt(values[keep])
+    whitened = basis.T @ d
+    chi2 = float(whitened @ whitened)
+    dof = int(keep.sum())
+    p_value = float(stats.chi2.sf(chi2, dof)) if dof else 1.0
+    matched = math.nan
+    if template is not None and dof:
+        shape = basis.T @ (np.asarray(template, dtype=float) @ average)
+        norm = float(np.sqrt(shape @ shape))
+        if norm > 0:
+            matched = float(shape @ whitened) / norm
+            p_value = min(1.0, 2.0 * min(p_value, 2.0 * float(stats.norm.sf(abs(matched)))))
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    bands = tuple(
+        SubBand(float(freq[m][0]), float(freq[m][-1]), float(db), float(sb))
+        for m, db, sb in zip(masks, d, std, strict=True)
+    )
+    beyond = [b for b in bands if abs(b.sigma) >= BAND_SIGMA]
+    worst = max(bands, key=lambda b: abs(b.sigma))
+    span = beyond or [worst]
+    return DriftVerdict(
+        sigma_of(p_value), chi2, dof, p_value, bands, (span[0].lo_hz, span[-1].hi_hz),
+        worst.difference_k, worst.sigma, matched,
+    )

@@ -17,6 +17,9 @@ temperature. The engine's ``T_L`` and ``T_NS`` are therefore *effective* quantit
 
 which :meth:`ReceiverPhysics.effective_theta` computes exactly, so that a calibration of
 simulated data can be checked against the truth it should recover.
+
+With a :class:`~reach_receiver.sim.drift.NoiseWaveDrift` (``PhysicsConfig.drift``; none by
+default) the LNA's noise waves follow its temperature, which may ramp slowly.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from reach_receiver.frontend.layout import (
     VNA_STANDARDS,
     source_at,
 )
+from reach_receiver.sim.drift import NoiseWaveDrift
 from reach_receiver.sim.effects import SimEffects
 
 FloatArray = NDArray[np.float64]
@@ -76,6 +80,7 @@ class PhysicsConfig:
     outdoor_swing_c: float = 8.0
     seed: int = 0
     effects: SimEffects = field(default_factory=SimEffects)
+    drift: NoiseWaveDrift | None = None
 
 
 class ReceiverPhysics:
@@ -213,6 +218,21 @@ class ReceiverPhysics:
             return self.outdoor_c(t) + KELVIN_AT_0C
         return self.enclosure_k()
 
+    def lna_c(self, t: float) -> float:
+        """The LNA's temperature (C): the enclosure's, its own heating, any drift's ramp."""
+        lna = self.enclosure_k() - KELVIN_AT_0C + self.config.lna_above_enclosure_k
+        drift = self.config.drift
+        return lna if drift is None else lna + drift.ramp_k(t - self._t0)
+
+    def theta_at(self, t: float, freq_hz: FloatArray | None = None) -> FloatArray:
+        """The receiver's parameters ``(5, n)`` at time ``t`` (its drift applied).
+
+        On the physics' own channels unless ``freq_hz`` is given.
+        """
+        theta = self._theta if freq_hz is None else self.truth.theta(np.asarray(freq_hz, float))
+        drift = self.config.drift
+        return theta if drift is None else drift.theta(theta, self.lna_c(t))
+
     def thermocouples_c(self, t: float) -> list[float]:
         """True temperatures of TC-08 ports 0-8 (table 2.2), degrees C."""
         enclosure = self.enclosure_k() - KELVIN_AT_0C
@@ -227,14 +247,14 @@ class ReceiverPhysics:
             terminations,
             enclosure,
             enclosure,
-            enclosure + self.config.lna_above_enclosure_k,
+            self.lna_c(t),
             self.outdoor_c(t),
         ]
 
     def mcp9808_c(self) -> dict[int, float]:
         """The front-end's I2C sensors (addresses 0x18-0x1B): enclosure and LNA board."""
         enclosure = self.enclosure_k() - KELVIN_AT_0C
-        lna = enclosure + self.config.lna_above_enclosure_k
+        lna = self.lna_c(self.clock.now())
         return {0x18: enclosure, 0x19: enclosure + 0.2, 0x1A: lna, 0x1B: enclosure - 0.1}
 
     # ----------------------------------------------------------------- spectra
@@ -264,19 +284,23 @@ class ReceiverPhysics:
                 t_term = self.thermocouples_c(t)[self.thermocouple_of(name)] + KELVIN_AT_0C
                 t_src = effects.through_cable(name, gamma, f, t_term, t_cab)
             gamma, t_src = effects.through_mts(gamma, t_src, f, self.enclosure_k())
-        p, _, _ = dicke_powers(self._theta, gamma, self._gamma_rec, t_src, self._gain, self._offset)
+        theta = self.theta_at(t)
+        p, _, _ = dicke_powers(theta, gamma, self._gamma_rec, t_src, self._gain, self._offset)
         return np.asarray(p, dtype=float)
 
-    def true_temperature_k(self, name: str, q: FloatArray, freq_hz: FloatArray) -> FloatArray:
+    def true_temperature_k(
+        self, name: str, q: FloatArray, freq_hz: FloatArray, t: float | None = None
+    ) -> FloatArray:
         """The temperature at the sources' plane that gives the measured ``q`` (eq. 3.21).
 
         The forward model is linear in the source's temperature, ``P = P_0 + T dP``, so
         ``T = (Q (P_NS - P_L) + P_L - P_0) / dP`` with the noiseless references: with or
         without :mod:`~reach_receiver.sim.effects`, the truth a calibration is judged by.
-        ``freq_hz`` must be channel centres of the spectrometer.
+        ``freq_hz`` must be channel centres of the spectrometer; ``t`` is when ``q`` was
+        measured (the physics' start by default; it matters only with a drift or effects).
         """
         k = np.rint(np.asarray(freq_hz) / self.config.channel_width_hz).astype(int)
-        t = self._t0
+        t = self._t0 if t is None else t
         p0 = self._power(name, np.zeros(self._model_freq.shape), t)[k]
         dp = self._power(name, np.ones(self._model_freq.shape), t)[k] - p0
         p_l = self.noiseless_power(REFERENCE_LOAD, t)[k]
@@ -315,10 +339,13 @@ class ReceiverPhysics:
         return np.asarray(out * (1.0 + radiometer * noise), dtype=float)
 
     # ----------------------------------------------------------------- the truth
-    def effective_theta(self, freq_hz: FloatArray) -> FloatArray:
-        """The noise-wave parameters ``(5, n)`` a perfect calibration recovers (eqs. above)."""
+    def effective_theta(self, freq_hz: FloatArray, t: float | None = None) -> FloatArray:
+        """The noise-wave parameters ``(5, n)`` a perfect calibration recovers (eqs. above).
+
+        At time ``t`` (now by default): it matters only with a drift.
+        """
         f = np.asarray(freq_hz, dtype=float)
-        theta = self.truth.theta(f)
+        theta = self.theta_at(self.clock.now() if t is None else t, f)
         gamma_rec = lna_reflection(f, self.config.f_lo_hz, self.config.f_hi_hz)
         gain = self.truth.gain(f)
         offset = self.truth.offset_k(f)

@@ -9,8 +9,10 @@ latest calibrated S11s, the calibrators' thermocouple temperatures), the same ha
 that ``reach-cal solve run.h5`` reads, so the two give the same solution. The band is
 the site's (``calibration.band_hz``) unless the step gives one. The solution is stored
 with the hand-over it was made from, verified against a benchmark solution if one is
-given (thesis 2.1.3: every parameter's band-averaged value within 5 %), and summarised
-by its distance to the noise floor on the validation source (the antenna when measured).
+given (thesis 2.1.3: every parameter's band-averaged value within 5 %), compared with
+the previous solution on the validation source (the antenna when measured) for a drift of
+the receiver (:mod:`reach_receiver.run.drift`: the ``calibration drift`` alarm under
+``reachd``), and summarised by its distance to the noise floor on that source.
 
 ``mts``, ``cables`` and ``rfi`` (each ``true`` by default) apply the corrections the site
 file's ``calibration`` section describes (:mod:`reach_receiver.store.corrections`: the
@@ -60,6 +62,7 @@ from reach_receiver.store.handover import ANTENNA, RECEIVER
 
 from ..checks import compare_with_benchmark
 from ..context import CheckFailed, RunContext
+from ..drift import check_drift
 from ..kind import RunnableKind
 
 FloatArray = NDArray[np.float64]
@@ -263,7 +266,7 @@ class CalibrateKind(RunnableKind[Calibrate]):
         return None if any(kind == "solution" for kind, _ in measured) else step
 
     def execute(self, step: Calibrate, run: RunContext) -> None:
-        """Solve, verify against the benchmark, store, and summarise."""
+        """Solve, verify against the benchmark and the previous solution, store, summarise."""
         lo, hi = run.site.band_hz
         band = (step.f_lo_hz or lo, step.f_hi_hz or hi)
         run.progress.update(f"calibrating {band[0] / 1e6:g}-{band[1] / 1e6:g} MHz", 0, 1, None)
@@ -285,6 +288,7 @@ class CalibrateKind(RunnableKind[Calibrate]):
                 f"(tolerance {100 * step.tolerance:.0f} %)"
             )
             run.record_check("benchmark_solution", verdict.passed, detail, verification)
+        check_drift(run, outcome.solution, outcome.data, outcome.validation)
         run.store.add_solution(
             outcome.solution,
             timestamp=run.clock.now(),
