@@ -50,9 +50,10 @@ from ..choice.model_fit import OrderChoice, fit
 from ..core.errors import IllPosedError
 from ..model.basis import DelayBasis, PolynomialBasis
 from ..model.noise_waves import INDEX
-from ..model.polynomial_model import as_orders
+from ..model.polynomial_model import Orders, as_orders, coefficient_slices
 from ..regression.conjugate import CoefficientPrior, LinearPosterior, ScalePrior
 from ..regression.normal_equations import build_normal_equations, evaluate_coefficients
+from .delay_candidates import candidate_delays, parameter_candidates, union
 
 FloatArray = NDArray[np.float64]
 #: Frequency bins of the residual test.
@@ -63,13 +64,13 @@ EXCESS_SIGMA = 5.0
 MIN_GAIN_NATS = 10.0
 #: Delays at most.
 MAX_DELAYS = 2
-#: Periodogram peaks tried per delay.
-CANDIDATES = 3
 #: Polynomial terms tried beside the delays.
 POLYNOMIAL_TERMS = tuple(range(3, 13))
 #: Polynomial terms of the fit whose residuals also propose delays: the automatic box's
 #: start (``model_fit.DEFAULT_MAX_ORDERS``), before its growth absorbs part of a ripple.
 START_TERMS = 8
+#: A parameter's ripple is measured where a delay term is this many sd from zero.
+MEASURED_SIGMAS = 3.0
 #: Rounds of a delay's refinement and its polynomial terms' choice (:func:`refined`).
 REFINE_ROUNDS = 4
 #: Gauss-Newton steps about a delay model's curves.
@@ -130,75 +131,6 @@ def excess(chi2: float, dof: float) -> bool:
     return chi2 - dof > EXCESS_SIGMA * np.sqrt(2.0 * dof)
 
 
-def candidate_delays(
-    rows: Rows, theta: FloatArray, freq_hz: FloatArray, exclude: tuple[float, ...] = ()
-) -> list[float]:
-    """Delays (s) of the residuals' largest periodogram peaks (module docstring)."""
-    residual = rows.response - np.einsum("mnk,kn->mn", rows.features, theta)
-    u = rows.weights * residual
-    return _peaks(u / np.sqrt(np.sum(rows.weights, axis=1, keepdims=True)), freq_hz, exclude)
-
-
-def parameter_candidates(
-    rows: Rows, theta: FloatArray, freq_hz: FloatArray, exclude: tuple[float, ...] = ()
-) -> list[float]:
-    """Delays (s) of the largest periodogram peaks of the residual *noise waves*.
-
-    A ripple on ``T_cos`` reaches calibrator ``i``'s rows through ``X_cos``, whose phase
-    turns with that calibrator's own cable, so the rows' periodogram peaks at the sums
-    and differences of the two delays (a 50 ns ripple was proposed at 28 and 128 ns).
-    Solved channel by channel for the five parameters (``M >= 5`` calibrators), the
-    residual is the parameters' own: each parameter's residual curve, scaled by its
-    median sd over channels (a constant, which does not modulate it), proposes delays.
-    ``[]`` with fewer than five calibrators.
-    """
-    f, w = rows.features, rows.weights
-    if f.shape[0] < f.shape[2]:
-        return []
-    residual = rows.response - np.einsum("mnk,kn->mn", f, theta)
-    gram = np.einsum("mnk,mn,mnl->nkl", f, w, f)
-    rhs = np.einsum("mnk,mn->nk", f, w * residual)
-    try:
-        delta = np.linalg.solve(gram, rhs[..., None])[..., 0]  # (N, 5)
-        sd = np.sqrt(np.abs(np.diagonal(np.linalg.inv(gram), axis1=1, axis2=2)))
-    except np.linalg.LinAlgError:
-        return []
-    scale = np.median(sd, axis=0)
-    return _peaks((delta / np.where(scale > 0, scale, 1.0)).T, freq_hz, exclude)
-
-
-def _peaks(u: FloatArray, freq_hz: FloatArray, exclude: tuple[float, ...]) -> list[float]:
-    """The :data:`CANDIDATES` largest peaks of ``sum_i |FFT(u_i)|^2`` over delay."""
-    n = u.shape[1]
-    pad = 8 * n
-    power = np.sum(np.abs(np.fft.rfft(u, n=pad, axis=1)) ** 2, axis=0)
-    step = float(np.median(np.diff(freq_hz)))
-    delays = np.fft.rfftfreq(pad, d=step)
-    band = float(freq_hz[-1] - freq_hz[0])
-    resolution = 1.0 / band
-    power[delays < 1.5 * resolution] = 0.0
-    for d in exclude:
-        power[np.abs(delays - d) < resolution] = 0.0
-    found: list[float] = []
-    for _ in range(CANDIDATES):
-        k = int(np.argmax(power))
-        if power[k] <= 0:
-            break
-        found.append(float(delays[k]))
-        power[np.abs(delays - delays[k]) < resolution] = 0.0
-    return found
-
-
-def _union(lists: list[list[float]], resolution: float) -> list[float]:
-    """The candidates of every list, in turn, those within ``resolution`` of one kept once."""
-    out: list[float] = []
-    for group in lists:
-        for tau in group:
-            if all(abs(tau - t) >= resolution for t in out):
-                out.append(tau)
-    return out
-
-
 @dataclass
 class DelayModel:
     """A fitted model: its basis, orders, posterior and log evidence."""
@@ -216,11 +148,12 @@ class DelayModel:
 
 def _fit_model(
     rows: Rows, freq_hz: FloatArray, basis: PolynomialBasis, n_terms: int,
-    scale_prior: ScalePrior | None,
+    scale_prior: ScalePrior | None, orders: Orders | None = None,
 ) -> DelayModel | None:
-    orders = as_orders((n_terms,) * 5)
+    """The model of ``n_terms`` a parameter (or ``orders``) under the fixed wide prior."""
+    orders = as_orders((n_terms,) * 5) if orders is None else orders
     prior = CoefficientPrior()
-    b = basis.matrix(freq_hz, n_terms)
+    b = basis.matrix(freq_hz, max(orders))
     normal = build_normal_equations(
         rows.features, rows.weights, rows.response, b, orders,
         ridge=1.0 / prior.vectors(orders)[1],
@@ -342,22 +275,33 @@ def marginal_model(
     ``2 pi (nu - nu_c) A sin(...)``, which no column of the model holds, so a posterior
     at the found delay alone is too sure of the ripple far from the band's centre (at a
     20 MHz period and 0.3-3 K, 1.2-2x its error bars). Each delay becomes the pair
-    ``tau -+ sd``: their cos/sin columns span those at ``tau`` and the derivative's to
+    ``tau, tau + sd``: their cos/sin columns span those at ``tau`` and the derivative's to
     second order in ``sd``, so the fit (under the same wide prior) measures the shift
     the data allow and the posterior carries it: the delay linearised and marginalised,
     with a shift of its own per parameter. The pair's spacing is kept within
     ``[1e-3, 0.25]`` of the band's delay resolution (columns apart enough to solve, close
-    enough for the expansion).
+    enough for the expansion). Only parameters whose ripple the model measures (a delay
+    term :data:`MEASURED_SIGMAS` sd from zero) get the pair's second delay: the rest keep
+    ``tau`` alone (the basis's delays are ``tau`` then ``tau + sd``), else ``T_NS``'s
+    unmeasured shift left it to the prior (328 K sd at 130 MHz, refused).
     """
     assert isinstance(model.basis, DelayBasis)
     sds = delay_sd(rows, freq_hz, poly, model, scale_prior)
     resolution = 1.0 / float(freq_hz[-1] - freq_hz[0])
-    pairs: list[float] = []
-    for tau, sd in zip(model.basis.delays_s, sds, strict=True):
-        h = float(np.clip(sd, 1e-3 * resolution, 0.25 * resolution))
-        pairs += [tau - h, tau + h]
-    k = model.basis.polynomial_terms
-    wide = _with_delays(rows, freq_hz, poly, tuple(pairs), k, scale_prior)
+    delays = model.basis.delays_s
+    shifted = [
+        tau + float(np.clip(sd, 1e-3 * resolution, 0.25 * resolution))
+        for tau, sd in zip(delays, sds, strict=True)
+    ]
+    k, d = model.basis.polynomial_terms, len(delays)
+    post = model.posterior
+    z = np.abs(post.mean) / np.sqrt(np.maximum(np.diag(post.covariance), 1e-300))
+    orders = as_orders([
+        k + 2 * d + 2 * d * bool(np.any(z[part][k:] >= MEASURED_SIGMAS))
+        for part in coefficient_slices(post.orders)
+    ])
+    basis = DelayBasis(poly.kind, poly.f_lo_hz, poly.f_hi_hz, k, (*delays, *shifted))
+    wide = _fit_model(rows, freq_hz, basis, max(orders), scale_prior, orders)
     return (model if wide is None else wide), sds
 
 
@@ -412,7 +356,7 @@ def extend(
     seen = [start.curves(freq_hz)] if start is not None else []
     for _ in range(MAX_DELAYS if search else 0):
         tried = []
-        for tau in _union(
+        for tau in union(
             [find(current_rows, t, freq_hz, delays)
              for t in [current_theta, *seen]
              for find in (parameter_candidates, candidate_delays)],
