@@ -107,7 +107,7 @@ def compare_with_benchmark(
 
 
 #: Posterior draws of each solution for the sub-bands' covariance (in blocks, for memory).
-DRIFT_DRAWS = 2000
+DRIFT_DRAWS = 1000
 #: A sub-band beyond this many of its own sigma is part of the band a drift reports.
 BAND_SIGMA = 2.0
 
