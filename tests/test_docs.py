@@ -20,12 +20,41 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
-BLOCK = re.compile(r"^```python\n(.*?)^```", re.DOTALL | re.MULTILINE)
+#: A ```python block and the ```text block that may follow it: what it prints.
+BLOCK = re.compile(
+    r"^```python\n(?P<code>.*?)^```\n(?:\s*^```text\n(?P<output>.*?)^```)?",
+    re.DOTALL | re.MULTILINE,
+)
+NUMBER = re.compile(r"-?\d+(?:\.(\d+))?")
 
 
-def python_blocks(page: Path) -> list[str]:
-    """The page's ```python blocks, in order."""
-    return BLOCK.findall(page.read_text())
+def python_blocks(page: Path) -> list[tuple[str, str | None]]:
+    """The page's ```python blocks in order, each with the output shown after it (or None)."""
+    return [(m["code"], m["output"]) for m in BLOCK.finditer(page.read_text())]
+
+
+def same_output(shown: str, printed: str) -> str | None:
+    """Why ``printed`` is not the ``shown`` output, or None.
+
+    The words and integers must match exactly; each decimal number to 2 % or 5 units of
+    its last printed digit, whichever is wider: the run is seeded, and a BLAS or platform
+    moves only the last digits (a changed solver moves more, and the page must say so).
+    """
+    want, got = shown.strip().splitlines(), printed.strip().splitlines()
+    if len(want) != len(got):
+        return f"{len(got)} lines printed, {len(want)} shown"
+    for w, g in zip(want, got, strict=True):
+        if NUMBER.sub("#", w).split() != NUMBER.sub("#", g).split():
+            return f"printed {g!r}, shown {w!r}"
+        for mw, mg in zip(NUMBER.finditer(w), NUMBER.finditer(g), strict=True):
+            a, b = float(mw[0]), float(mg[0])
+            if mw[1] is None:  # an integer: a count, an order
+                if mw[0] != mg[0]:
+                    return f"printed {g!r}, shown {w!r}: {mg[0]} is not {mw[0]}"
+                continue
+            if abs(a - b) > max(5 * 10.0 ** -len(mw[1]), 0.02 * abs(a)):
+                return f"printed {g!r}, shown {w!r}: {mg[0]} is not {mw[0]}"
+    return None
 
 
 def table_under(text: str, heading: str) -> list[str]:
@@ -48,12 +77,18 @@ def test_astronomers_guide_runs(tmp_path, monkeypatch):
     assert len(blocks) >= 6, "the walk-through lost its code blocks"
     monkeypatch.chdir(tmp_path)
     namespace: dict[str, Any] = {"__name__": "__docs__"}
-    out = io.StringIO()
-    for number, block in enumerate(blocks, 1):
+    printed = ""
+    for number, (block, shown) in enumerate(blocks, 1):
         code = compile(block, f"astronomers-guide.md, python block {number}", "exec")
+        out = io.StringIO()
         with contextlib.redirect_stdout(out):
             exec(code, namespace)
-    printed = out.getvalue()
+        printed += out.getvalue()
+        if shown is not None:
+            wrong = same_output(shown, out.getvalue())
+            assert wrong is None, f"python block {number}'s output: {wrong}"
+        else:
+            assert not out.getvalue(), f"python block {number} prints, and the page shows none"
     # The walk-through's own claims, on its own numbers: a file was written and read,
     # the antenna calibrated near its simulated temperature, the error bars hold the
     # actual error and sit near the floor. The tolerances are a single run's scatter
@@ -110,3 +145,18 @@ def test_readme_links_to_pages_that_exist():
     assert len(links) >= 7, "README lost its table of contents"
     missing = [link for link in links if not (ROOT / link).is_file()]
     assert not missing, f"README links to missing files: {missing}"
+
+
+@pytest.mark.parametrize(
+    ("shown", "printed", "same"),
+    [
+        ("s^2: 1.003", "s^2: 1.004", True),
+        ("s^2: 1.003", "s^2: 1.103", False),
+        ("orders (4, 3, 4)", "orders (4, 3, 5)", False),
+        ("warnings: none", "warnings: ['the fit did not converge']", False),
+        ("1141.04 +- 0.092", "1140.11 +- 0.093", True),
+        ("a\nb", "a", False),
+    ],
+)
+def test_output_comparison(shown, printed, same):
+    assert (same_output(shown, printed) is None) == same
