@@ -41,6 +41,18 @@ def test_a_ripple_is_held_by_delay_terms(period_mhz: float, seed: int) -> None:
     assert 0.6 < ratio < 1.6  # one run; without delay terms 6-9
 
 
+def test_a_box_that_grew_short_of_its_ceiling_looks_for_delays() -> None:
+    """Two periods of ripple over the band (40 MHz): the search grew its box to 12-16
+    terms and stopped inside it, and the test of the binned residuals passed, so no delay
+    was tried (its error 0.6-3x its error bar over 12 runs); a grown box now tries them."""
+    run = draw_run(40.0, np.random.default_rng(8))
+    sol = solve_radiometric(run.data)
+    assert sol.metadata["orders_at_ceiling"] == []
+    assert max(sol.metadata["order_limits"]) > 8
+    (delay,) = np.asarray(sol.metadata["delay_terms"]["delays_ns"]) * 1e-9
+    assert abs(delay - 25e-9) < 3e-9  # a quarter of the band's resolution (12.5 ns)
+
+
 def test_a_polynomial_receiver_gets_no_delay_terms() -> None:
     cfg = SimulationConfig(channel_width_hz=ITPM_CHANNEL_WIDTH_HZ * 8, integration_s=120.0)
     sol = solve_radiometric(simulate_run(cfg, rng=5).data)

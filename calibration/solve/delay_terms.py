@@ -356,11 +356,14 @@ def extend(
     seen = [start.curves(freq_hz)] if start is not None else []
     for _ in range(MAX_DELAYS if search else 0):
         tried = []
+        # The start's residuals first: a grown box's fit has absorbed part of a ripple and
+        # its residual's peak sits above the delay (56 ns for 50). Candidates a refinement
+        # window apart are tried apart (delay_candidates.union).
         for tau in union(
             [find(current_rows, t, freq_hz, delays)
-             for t in [current_theta, *seen]
+             for t in [*seen, current_theta]
              for find in (parameter_candidates, candidate_delays)],
-            1.0 / float(freq_hz[-1] - freq_hz[0]),
+            0.25 / float(freq_hz[-1] - freq_hz[0]),
         ):
             model = best_model(
                 current_rows, freq_hz, poly, (*delays, tau), scale_prior, refine=False
