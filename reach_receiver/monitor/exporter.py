@@ -42,6 +42,8 @@ HELP = {
     "reach_disk_free_bytes": "free space of the data directory's file system",
     "reach_daemon_state": "reachd state: 0 starting, 1 idle, 2 running, 3 observing, "
     "4 faulted, 5 stopping, 6 stopped",
+    "reach_calibration_drift_sigma": "the latest calibration against the previous solution on "
+    "the antenna, in Gaussian sigma of its false-alarm probability (one a calibration)",
 }
 
 
