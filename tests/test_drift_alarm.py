@@ -12,8 +12,8 @@ the band. (The calibration errors are correlated over the band, so a drift of 3 
 one channel is not 3 sigma per channel times the square root of the channels: what gives
 the test its power is that the drift moves the antenna's temperature in a way that the
 two posteriors, jointly, say cannot happen by chance: measured, 47-68 sigma over this
-family, while the worst 5 MHz sub-band alone shows 2-4 sigma.) The alarm's life, raised at WARNING and cleared at INFO, in words, is
-checked on readings alone.
+family, while the worst 5 MHz sub-band alone shows 2-4 sigma.) The alarm's life, raised
+at WARNING and cleared at INFO, in words, is checked on readings alone.
 """
 
 import logging
