@@ -99,3 +99,27 @@ def test_the_alarm_is_raised_at_warning_and_cleared_at_info_in_words(caplog):
     assert cleared.levelno == logging.INFO
     assert "calibration drift over: the new solution agrees with the previous one (joint " \
            "2.1 sigma) after 12 h" in cleared.getMessage()
+
+
+@pytest.mark.parametrize(("ramp", "hours"), [(0.0, 30.0), (2.0, 6.0), (12.0, 30.0)])
+def test_the_simulated_lna_drift_moves_only_its_noise_waves(ramp, hours):
+    clock = ManualClock()
+    still = ReceiverPhysics(clock, PhysicsConfig())
+    drift = NoiseWaveDrift(ramp, start_s=3600.0, limit_k=5.0)
+    drifting = ReceiverPhysics(clock, PhysicsConfig(drift=drift))
+    freq = np.linspace(50e6, 130e6, 9)
+    before = drifting.effective_theta(freq)
+    clock.advance(3600.0 * hours)
+    warmer = min(ramp * (hours - 1.0) / 24.0, 5.0)
+    lna = drifting.lna_c(clock.now())
+    assert lna - still.lna_c(clock.now()) == pytest.approx(warmer)
+    assert drifting.thermocouples_c(clock.now())[7] == pytest.approx(lna)  # TC-08 port 7
+    after = drifting.effective_theta(freq)
+    scale = 1.0 + drift.per_k * warmer
+    np.testing.assert_allclose(after[:3], before[:3] * scale, rtol=1e-12)
+    # T_NS and T_L are the diode's and the reference load's: they move only through the
+    # noise waves' coupling to the load's small reflection: under 5 mK per kelvin.
+    np.testing.assert_allclose(after[3:], before[3:], rtol=0, atol=5e-3 * warmer + 1e-9)
+    # At its reference (27 C: the LNA 2 K above a 25 C enclosure) it is the receiver
+    # without a drift, the simulator's default.
+    np.testing.assert_allclose(before, still.effective_theta(freq), rtol=1e-12)
