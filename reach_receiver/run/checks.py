@@ -1,4 +1,4 @@
-"""The run's checks: the VNA against its test load, a new solution against a benchmark.
+"""The run's checks: the VNA's test load, a new solution against a benchmark and its forerunner.
 
 Pure functions of arrays, so each is tested on its own and the runner only records
 their verdicts.
@@ -25,10 +25,15 @@ their verdicts.
   independent nor honest; instead ``D`` is averaged over sub-bands (``d_b``, 5 MHz by
   default), their covariance ``C = C_new + C_old`` taken from posterior draws of each
   solution, and ``chi2 = d^T C^-1 d`` compared with a chi-square of as many degrees of
-  freedom as sub-bands: one test per calibration, of false-alarm probability ``p`` at its
-  threshold. The statistic is stated as the two-sided Gaussian sigma of the same tail
-  probability (``p = 1e-4`` is 3.9 sigma), the sub-bands beyond 2 sigma on their own give
-  the band, and the worst of them the size (K and sigma).
+  freedom as ``C`` has rank (16 sub-bands over 50-130 MHz; fewer where the two posteriors
+  span less). Where a kind of drift is expected, the matched test along its shape ``m``
+  is added, ``z = m^T C^-1 d / sqrt(m^T C^-1 m)``, and the two joined by Bonferroni,
+  ``p = 2 min(p_chi2, p_z)``: one test per calibration, of false-alarm probability ``p``
+  at its threshold. The statistic is stated as the two-sided Gaussian sigma of the same
+  tail probability (``p = 1e-4`` is 3.9 sigma), the sub-bands beyond 2 sigma on their
+  own give the band, and the worst of them the size (K and sigma). The benchmark and the
+  drift answer different questions and sit side by side: the benchmark is a tolerance
+  against a named file; the drift, a test against the solution used until now.
 
 RFI flags of calibrated spectra are the engine's (:func:`calibration.checks.rfi.flag_sky`).
 """
