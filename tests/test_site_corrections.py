@@ -40,7 +40,7 @@ def test_a_cable_without_its_thermocouple_or_with_two_models_is_refused_with_its
     assert f"{path}:" in text
     assert "calibration.cables.hot.thermocouple: missing required key" in text
     assert "calibration.cables.c2r27.s2p: give a measured two-port or a data-sheet" in text
-    assert "calibration.checks.rfi: must be true or false" in text
+    assert "calibration.rfi: must be true or false" in text
 
 
 def test_the_run_summary_says_what_the_corrections_did():
