@@ -11,7 +11,7 @@ noiseless receiver), the RMS a noise-limited calibration would reach, the Cramer
 of the calibration error, and the RMS difference between ours and the published solution.
 The bounds of ``tests/test_edges3_real.py`` are shown for reference.
 
-``python -m benchmarks.real_data_edges3 --leave-one-out`` prints only the README's
+``python -m benchmarks.real_data_edges3 --leave-one-out`` prints only the docs'
 real-data leave-one-out figures (:func:`leave_one_out_table`): the run imported as an
 analyst would (``reach-cal import edges``, with the pipeline's modelled S11s, and from
 the raw VNA readings of day 2022-319 with and without the receiver's path), solved and
@@ -251,7 +251,7 @@ def _cli(*args: str) -> tuple[int, str]:
 
 
 def leave_one_out_table(directory: Path) -> None:
-    """The README's EDGES-3 leave-one-out figures, by the command line's defaults.
+    """The docs' EDGES-3 leave-one-out figures (docs/results.md), by the command line's defaults.
 
     Each row: ``reach-cal import edges`` (hot-load cable UT-141C-SP, band 50-190 MHz) with
     the S11s named, then ``reach-cal solve`` (its s^2) and ``reach-cal validate

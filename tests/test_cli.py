@@ -88,7 +88,7 @@ def test_simulate_solve_apply_summary(tmp_path, capsys):
     # At or below the radiometer noise floor: the Cramer-Rao bound is the unbiased
     # estimator's at the true orders, and the widths fitted at the chosen model shrink
     # below it (this run: predicted 0.63 of it, actual 0.57; the REACH-like ensemble's
-    # median error 0.88 of it, README "Model choice").
+    # median error 0.88 of it, docs/results.md, "Model choice").
     assert 0.5 < ratio < 1.3
     floor_mk = _number(r"noise floor RMS.*: ([\d.]+) mK", text)
     actual_mk = _number(r"actual calibration error RMS.*: ([\d.]+) mK", text)

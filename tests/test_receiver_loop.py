@@ -167,7 +167,7 @@ def test_engine_recovers_the_simulators_noise_waves_within_the_posterior(measure
     # values per parameter), so a stricter per-channel bound would not be a 1-sigma test.
     # Typical runs give a largest |z| of 1.3-3; one CI run under load gave 4.02 at T_unc's
     # band edge. The parameters' error bars leave out that the receiver reflection's VNA
-    # error is shared by every calibrator row (README, "The VNA's errors"), which makes
+    # error is shared by every calibrator row (docs/method.md, "The VNA's errors"), which makes
     # them up to 1.7x small where that error dominates: hence 4.5, not 4.
     rms = np.sqrt(np.mean(z**2, axis=1))
     assert np.all(rms < 2.5), rms

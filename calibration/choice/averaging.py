@@ -51,7 +51,7 @@ def smooth_prior_share(n_models: int) -> float:
     waves are exact quadratics at 2-6 sigma, 1.6 nats below the best polynomial's
     evidence (``benchmarks/polynomial_truths.py``), and shrank the real quadratic terms;
     on EDGES B18 and EDGES-3 the average sat on the box's edge. Given the prior of one
-    model, they win where the data want every term (smooth truths, the README's
+    model, they win where the data want every term (smooth truths, docs/results.md's
     "Model choice"), by the evidence alone. The price: on truths of many weak terms
     (tests/test_model_choice.py's ensemble) the average's 68 % intervals cover 62.9 %
     where even odds covered 64.8 % (63.3 % at odds of one to ``sqrt(n_models)``, which

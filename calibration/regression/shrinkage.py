@@ -120,7 +120,7 @@ class ShrinkagePrior:
         terms feel a step most. The grid 1, 0.3, 0.1, 0.03 changed the eighth term by
         1000 times between its first two values and had nothing for a receiver whose
         terms fall by 0.5-0.7 per order, as a cable's ripple does. Measured on the
-        benchmark's earlier ensembles (terms sized in the prior's shrunk sd; README)
+        benchmark's earlier ensembles (terms sized in the prior's shrunk sd; docs/results.md)
         (``python -m benchmarks.model_choice --runs 100 --seed 100``, the same runs):
         actual/predicted error 1.17 -> 1.14 on smooth truths, 1.30 -> 1.23 with 8
         calibrators, 1.09 -> 1.04 on the four EDGES loads, 1.15 -> 1.09 on random truths,
