@@ -4,8 +4,7 @@
 ``--max-orders``) are honoured: the search never goes beyond them. The automatic box
 starts at 8 terms a parameter; a parameter's limit is raised by ``extend_step`` (4), to at
 most ``ceiling`` (16), where the evidence-best model reaches it and the calibrators
-identify the raised box (``build`` cuts what they do not). The docs say:
-*"--max-orders
+identify the raised box (``build`` cuts what they do not). The docs say: *"--max-orders
 is a hard limit. Without it the box starts at 8 terms a parameter and a parameter's limit
 is raised by 4, up to 16, where the best model reaches it; a parameter still at its limit
 is named in a warning."*
