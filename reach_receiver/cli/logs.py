@@ -27,6 +27,23 @@ from typing import Any, TextIO
 STDERR_FORMAT = "%(asctime)s %(name)s: %(message)s"
 JOURNAL_FORMAT = "%(name)s: %(message)s"
 _HANDLER_NAME = "reach-stderr"
+
+
+class _StandardError(logging.StreamHandler):
+    """A handler that writes to the standard error of the moment, not of its creation.
+
+    A handler bound to the stream it was made with writes into a closed file once a caller
+    swaps ``sys.stderr`` back (a test's capture, a re-entrant caller), and every later
+    record ends in Python's "--- Logging error ---" traceback.
+    """
+
+    @property
+    def stream(self) -> TextIO:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: TextIO) -> None:
+        pass
 #: The width of an operator's terminal (wrapped log lines on a terminal).
 WIDTH = 80
 
@@ -184,7 +201,7 @@ def configure_logging(verbose: bool) -> None:
     journal = is_journal(sys.stderr)
     if journal:
         _prefix_printed_lines()
-    handler = logging.StreamHandler()
+    handler = _StandardError()
     handler.set_name(_HANDLER_NAME)
     if journal:
         handler.setLevel(logging.DEBUG if verbose else logging.INFO)
