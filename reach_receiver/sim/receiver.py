@@ -329,7 +329,13 @@ class SimulatedReceiver:
             self._tmp = None
 
     def __enter__(self) -> SimulatedReceiver:
-        self.start()
+        try:
+            self.start()
+        except BaseException:
+            # A Ctrl-C or SIGINT mid-start (reachd --sim's first second): what had started
+            # is stopped, else its threads keep the interpreter from exiting.
+            self.close()
+            raise
         return self
 
     def __exit__(self, *exc: object) -> None:
