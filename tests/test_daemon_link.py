@@ -39,6 +39,17 @@ def plug(link: Path, port: str) -> None:
     os.replace(partial, link)
 
 
+def unplug(link: Path, board) -> None:
+    """Close the board's terminal and remove its stable name, as udev does on unplugging.
+
+    Left in place, the name would point at a pseudo-terminal number the kernel hands to
+    the next one opened, here or in a test running beside this one: the daemon's retries
+    would then find someone else's board.
+    """
+    board.close()
+    link.unlink()
+
+
 def until(predicate, timeout_s: float = 60.0):
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -74,7 +85,7 @@ def test_an_unplugged_front_end_is_retried_with_back_off_and_the_run_carries_on(
     job = reachd.submit("unplugged.yaml", {"unplugged.yaml": SCHEDULE}, "test")
     until(lambda: reachd.progress is not None and "Dicke" in reachd.progress.step_text)
     time.sleep(0.5)  # inside the Dicke step
-    sim.teensy.close()  # unplugged: the terminal is gone
+    unplug(link, sim.teensy)  # the terminal and its name are gone
 
     faulted = until(lambda: reachd.machine.state == "faulted" and reachd._status_reply())
     assert "alarm" in faulted["status"]

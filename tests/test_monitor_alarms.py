@@ -36,7 +36,7 @@ from reach_receiver.devices.teensy import Teensy
 from reach_receiver.monitor import Reading
 from reach_receiver.monitor.alarms import AlarmBoard
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings
-from tests.test_daemon_link import plug, until
+from tests.test_daemon_link import plug, unplug, until
 
 COMPRESSION = 60.0
 CADENCE_S = 60.0
@@ -256,15 +256,15 @@ def test_status_shows_the_raised_alarm_and_the_latest_readings(idle_daemon, caps
 def test_an_unplugged_front_end_raises_the_silent_device_alarm_and_clears(idle_daemon):
     reachd, sim, link, _ = idle_daemon
 
-    def unplug():
-        sim.teensy.close()
+    def pull_out():
+        unplug(link, sim.teensy)
 
     def replug():
         sim.teensy.start()
         plug(link, sim.teensy.port)
 
     alarm_id = "device silent: reach_device_up{device=teensy}"
-    onset, raised, cleared = _raise_and_clear(reachd, unplug, replug, alarm_id)  # TEC: unknown
+    onset, raised, cleared = _raise_and_clear(reachd, pull_out, replug, alarm_id)  # TEC: unknown
     assert 0 <= onset <= 2 * CADENCE_S, onset
     assert FOR_S["device silent"] <= raised <= FOR_S["device silent"] + 2 * CADENCE_S, raised
     assert 0 <= cleared <= 2 * CADENCE_S, cleared
