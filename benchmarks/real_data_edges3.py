@@ -33,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 from calibration.checks.rfi import calibrator_flags, flag_spectrum  # noqa: E402
 from calibration.choice.model_fit import OrderChoice  # noqa: E402
 from calibration.io import edges_text as et  # noqa: E402
+from calibration.io.edges_import import load_edges3_run  # noqa: E402
 from calibration.model.data import CalibrationData  # noqa: E402
 from calibration.model.noise_waves import PARAMETERS, design_terms  # noqa: E402
 from calibration.solve.noise_floor import noise_floor  # noqa: E402
@@ -96,7 +97,7 @@ def edges_cal_cross_check(data: CalibrationData, published: dict[str, np.ndarray
 
 def main(directory: Path) -> None:
     t0 = time.perf_counter()
-    data = et.load_edges3_run(directory)
+    data = load_edges3_run(directory)
     published = et.read_published_solution(directory)
     solvers = {
         "ours(ev)": lambda: solve_radiometric(data),
@@ -215,8 +216,8 @@ def corrections_table(directory: Path) -> None:
     nothing in them; the matched loads' own spectra are searched instead and the count is
     printed (the lab is shielded; at 5 sigma Gaussian noise alone flags almost nothing).
     """
-    raw = et.load_edges3_run(directory, hot_load_loss=False)
-    lossy = et.load_edges3_run(directory)
+    raw = load_edges3_run(directory, hot_load_loss=False)
+    lossy = load_edges3_run(directory)
     errors: dict[str, dict[str, float]] = {}
     for label, data in (("none", raw), ("hot cable", lossy)):
         solution = solve_radiometric(data)

@@ -38,6 +38,7 @@ import pytest
 
 from calibration.choice.model_fit import OrderChoice
 from calibration.io import edges_text as et
+from calibration.io.edges_import import load_edges3_run
 from calibration.model.noise_waves import design_terms
 from calibration.solve.radiometric_solver import solve_radiometric
 
@@ -55,7 +56,7 @@ N_SPECTRA = 450
 
 @pytest.fixture(scope="module")
 def data():
-    return et.load_edges3_run(DATA)
+    return load_edges3_run(DATA)
 
 
 @pytest.fixture(scope="module")
@@ -210,7 +211,7 @@ def test_hot_load_loss_is_what_the_pipeline_applied(data, published):
 
 def test_raw_s11_files(published):
     """Cubic splines through the raw VNA points instead of the pipeline's S11 models."""
-    raw = et.load_edges3_run(DATA, use_modelled_s11=False)
+    raw = load_edges3_run(DATA, use_modelled_s11=False)
     sol = solve_radiometric(raw, OrderChoice.fixed((7, 7, 7, 7, 7)))
     amb = raw.sources["amb"]
     assert rms(calibrated(sol, raw, "amb") - amb.temperature_k) <= bound_k(raw, published, "amb")

@@ -1,7 +1,7 @@
 """Laboratory data in: the general EDGES importer, raw VNA exports, ``reach-cal import``.
 
 The real EDGES-3 run (``../shared/data/edges3-2022-316``, see ``tests/test_edges3_real.py``)
-checks that the new path gives what :func:`calibration.io.edges_text.load_edges3_run` gave:
+checks that the new path gives what :func:`calibration.io.edges_import.load_edges3_run` gave:
 the same arrays, bit for bit, through the run file, and the same solution. Raw VNA exports
 are made from known reflections with seeded random error terms and a modelled kit; their
 correction must return the reflections to the rounding of the arithmetic (1e-12).
@@ -24,6 +24,7 @@ from calibration.io.edges_import import (
     EdgesLayout,
     MeasuredLoss,
     import_edges,
+    load_edges3_run,
     read_gain_table,
 )
 from calibration.io.hdf5_io import read_run, run_noise_source_model, run_power_spectra
@@ -66,7 +67,7 @@ def assert_same_run(a, b):
 
 @pytest.fixture(scope="module")
 def today():
-    return et.load_edges3_run(DATA)
+    return load_edges3_run(DATA)
 
 
 def import_cli(tmp_path, *extra, directory=DATA, expect=0):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from calibration.choice.model_fit import OrderChoice
-from calibration.io.edges_text import load_edges3_run
+from calibration.io.edges_import import load_edges3_run
 from calibration.model.data import CalibrationData, Integration
 from calibration.model.simulate import SimulationConfig, simulate_run, simulate_source
 from calibration.solve.identifiability import (

@@ -16,7 +16,7 @@ import pytest
 from scipy.signal import argrelmin
 
 from calibration.checks.validation import leave_one_out
-from calibration.io import edges_text as et
+from calibration.io.edges_import import load_edges3_run
 from calibration.io.hdf5_io import write_run
 from calibration.io.solution_file import write_solution
 from calibration.model.simulate import SimulationConfig, simulate_run
@@ -145,7 +145,7 @@ def test_no_single_phase_marks_where_the_reflective_loads_differ(sims):
 @pytest.mark.skipif(not DATA.is_dir(), reason=f"no EDGES-3 data beside the checkout ({DATA})")
 def test_edges3_bands_pinch_where_the_reflective_loads_measure_one_parameter():
     """EDGES-3's four loads: T_cos's sd has its minima where X_sin = 0 (T_sin: X_cos = 0)."""
-    data = et.load_edges3_run(DATA)
+    data = load_edges3_run(DATA)
     solution = solve_radiometric(data)
     marks = single_phase_frequencies(data)
     assert marks is not None

@@ -25,7 +25,7 @@ import pytest
 
 from calibration.checks.validation import leave_one_out
 from calibration.cli import main
-from calibration.io import edges_text as et
+from calibration.io.edges_import import load_edges3_run
 from calibration.io.hdf5_io import write_run
 from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, SimulationConfig, simulate_run
 from calibration.solve.radiometric_solver import solve_radiometric
@@ -129,7 +129,7 @@ def test_cli_validate(tmp_path, capsys):
 def test_real_edges3_leave_one_out(tmp_path, capsys):
     """The real run: each load is refused (named) or gives finite numbers."""
     run = tmp_path / "run.h5"
-    write_run(run, et.load_edges3_run(DATA))
+    write_run(run, load_edges3_run(DATA))
     report = tmp_path / "loo.json"
     assert main(["validate", str(run), "--leave-one-out", "-o", str(report)]) == 0
     print(capsys.readouterr().out)

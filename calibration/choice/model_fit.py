@@ -60,7 +60,7 @@ Prior = CoefficientPrior | ShrinkagePrior
 
 
 #: The search box of the default (automatic) choice: 8 terms a parameter, raised where
-#: the data ask for more (:func:`fit_extending`).
+#: the data ask for more (:func:`~calibration.choice.model_size.fit_extending`).
 DEFAULT_MAX_ORDERS: Orders = (8, 8, 8, 8, 8)
 
 
@@ -73,7 +73,7 @@ class OrderChoice:
     the box is automatic: it starts at :data:`DEFAULT_MAX_ORDERS`, and where the
     evidence-best model reaches its edge in some parameter, that parameter's limit is
     raised by ``extend_step`` and the search resumed, up to ``ceiling`` terms, only while
-    the calibrators constrain the raised terms (:func:`fit_extending` states the rule).
+    the calibrators constrain the raised terms (:func:`~calibration.choice.model_size.fit_extending` states the rule).
     """
 
     orders: Orders | None = None
@@ -482,7 +482,3 @@ def _constrained(normal: NormalEquations, orders: Orders) -> bool:
     except IllPosedError:
         return False
     return True
-
-
-# fit_extending grows the automatic box and records the model used (calibration.choice.model_size).
-from .model_size import FitResult, fit_extending  # noqa: E402, F401

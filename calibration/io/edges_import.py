@@ -24,7 +24,7 @@ The hot load's temperature at the S11 plane (MIT EDGES memo 132; edges-cal ``ala
     T_plane(f) = G(f) T_hot + (1 - G(f)) T_cable                                  (L1)
 
 with ``G`` the cable's available power gain and ``T_cable`` its physical temperature, the
-ambient load's by default. :func:`calibration.io.edges_text.load_edges3_run` is this importer
+ambient load's by default. :func:`calibration.io.edges_import.load_edges3_run` is this importer
 with the settings of day 2022-316.
 """
 
@@ -45,6 +45,8 @@ from ..model.data import CalibrationData, Integration, SourceData
 from .edges_text import (
     INTEGRATION_PER_POSITION_S,
     T_CAL_K,
+    T_COLD_K,
+    T_HOT_K,
     T_LOAD_K,
     UT141C,
     coax_power_gain,
@@ -258,7 +260,7 @@ def import_edges(
 ) -> CalibrationData:
     """An EDGES run as :class:`CalibrationData`, its calibrators named as ``layout.loads``.
 
-    As :func:`calibration.io.edges_text.load_edges3_run` describes: pseudo-powers ``P_load =
+    As :func:`calibration.io.edges_import.load_edges3_run` describes: pseudo-powers ``P_load =
     300``, ``P_ns = 1300``, ``P_src = T*`` (so ``Q = (T* - 300) / 1000``), the noise
     bandwidth as channel width, ``n_spectra x integration_per_position_s`` a position.
     ``reflections`` (``{name: (freq_hz, gamma)}``, every load and the receiver) are
@@ -440,3 +442,55 @@ def _check_passive(
         f"S11 of {name} ({origin}): |Gamma| reaches {abs(gamma[worst]):.4g} at "
         f"{freq[worst] / 1e6:.6g} MHz (>= 1 {where}), impossible for a passive load;\n{fix}"
     )
+
+
+def load_edges3_run(
+    directory: str | Path,
+    band_mhz: tuple[float, float] = (50.0, 190.0),
+    use_modelled_s11: bool = True,
+    q_variance: str = "empirical",
+    hot_load_loss: bool = True,
+) -> CalibrationData:
+    """An EDGES-3 run as :class:`CalibrationData` with sources ``amb, hot, open, short``.
+
+    :func:`calibration.io.edges_import.import_edges` with the settings of day 2022-316 (its
+    file names, 306.5 K and 393.22 K, the hot load's UT-141C-SP cable).
+
+    Names follow the files (``amb``: the ambient, i.e. cold, load). Only T* is stored, so
+    the Dicke spectra are pseudo-powers ``P_load = 300``, ``P_ns = 1300``, ``P_src = T*``,
+    giving ``Q = (T* - 300) / 1000`` exactly. Their scale lacks the receiver's own noise,
+    so the engine's radiometer equation on them is a lower bound; ``channel_width_hz`` is
+    the noise bandwidth (:func:`noise_bandwidth_hz`), making that bound equal
+    :func:`radiometer_q_variance`; ``Integration`` is ``n_spectra x 5.37 s`` a position.
+
+    Parameters
+    ----------
+    directory, band_mhz
+        The run's directory; band kept (``s11_modelled.txt`` covers 50-190 MHz).
+    use_modelled_s11
+        Use the pipeline's S11 models (the receiver's from the ``lna`` column), else a
+        cubic spline through the raw ``s11<load>.csv`` and ``s11lna.csv`` points.
+    q_variance
+        ``q_variance_override`` of every source: ``"empirical"`` (default,
+        :func:`empirical_q_variance`: measured on these very spectra, so it includes the
+        receiver's noise and needs neither the integration time nor ``T_rx``, which the
+        files lack) or ``"radiometer"`` (:func:`radiometer_q_variance`, the lower bound).
+    hot_load_loss
+        Give the hot load ``G 393.22 + (1 - G) 306.5`` K with ``G`` of
+        :func:`coax_power_gain`, as the published solution did; else 393.22 K.
+
+    Returns
+    -------
+    CalibrationData
+        ``metadata``: ``n_spectra``, headers, ``channel_spacing_hz``, ``hot_load_gain``.
+    """
+    if q_variance not in ("empirical", "radiometer"):
+        raise ValueError(f"q_variance must be 'empirical' or 'radiometer', got {q_variance!r}")
+    spec = EdgesImport(
+        temperatures_k={"amb": T_COLD_K, "hot": T_HOT_K, "open": T_COLD_K, "short": T_COLD_K},
+        band_mhz=band_mhz,
+        s11="modelled" if use_modelled_s11 else "raw",
+        q_variance="empirical" if q_variance == "empirical" else "radiometer",
+        hot_loss=CableLoss(UT141C) if hot_load_loss else None,
+    )
+    return import_edges(directory, spec)

@@ -25,7 +25,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core.errors import FileFormatError
-from ..model.data import CalibrationData
 from .text_table import read_columns
 
 FloatArray = NDArray[np.float64]
@@ -231,57 +230,3 @@ def coax_power_gain(
     loss = np.abs(s12**2) * (1 - np.abs(t) ** 2)
     loss /= (1 - np.abs(gam) ** 2) * np.abs(1 - s11 * t) ** 2
     return np.asarray(loss, dtype=float)
-
-
-def load_edges3_run(
-    directory: str | Path,
-    band_mhz: tuple[float, float] = (50.0, 190.0),
-    use_modelled_s11: bool = True,
-    q_variance: str = "empirical",
-    hot_load_loss: bool = True,
-) -> CalibrationData:
-    """An EDGES-3 run as :class:`CalibrationData` with sources ``amb, hot, open, short``.
-
-    :func:`calibration.io.edges_import.import_edges` with the settings of day 2022-316 (its
-    file names, 306.5 K and 393.22 K, the hot load's UT-141C-SP cable).
-
-    Names follow the files (``amb``: the ambient, i.e. cold, load). Only T* is stored, so
-    the Dicke spectra are pseudo-powers ``P_load = 300``, ``P_ns = 1300``, ``P_src = T*``,
-    giving ``Q = (T* - 300) / 1000`` exactly. Their scale lacks the receiver's own noise,
-    so the engine's radiometer equation on them is a lower bound; ``channel_width_hz`` is
-    the noise bandwidth (:func:`noise_bandwidth_hz`), making that bound equal
-    :func:`radiometer_q_variance`; ``Integration`` is ``n_spectra x 5.37 s`` a position.
-
-    Parameters
-    ----------
-    directory, band_mhz
-        The run's directory; band kept (``s11_modelled.txt`` covers 50-190 MHz).
-    use_modelled_s11
-        Use the pipeline's S11 models (the receiver's from the ``lna`` column), else a
-        cubic spline through the raw ``s11<load>.csv`` and ``s11lna.csv`` points.
-    q_variance
-        ``q_variance_override`` of every source: ``"empirical"`` (default,
-        :func:`empirical_q_variance`: measured on these very spectra, so it includes the
-        receiver's noise and needs neither the integration time nor ``T_rx``, which the
-        files lack) or ``"radiometer"`` (:func:`radiometer_q_variance`, the lower bound).
-    hot_load_loss
-        Give the hot load ``G 393.22 + (1 - G) 306.5`` K with ``G`` of
-        :func:`coax_power_gain`, as the published solution did; else 393.22 K.
-
-    Returns
-    -------
-    CalibrationData
-        ``metadata``: ``n_spectra``, headers, ``channel_spacing_hz``, ``hot_load_gain``.
-    """
-    from .edges_import import CableLoss, EdgesImport, import_edges  # it builds on this module
-
-    if q_variance not in ("empirical", "radiometer"):
-        raise ValueError(f"q_variance must be 'empirical' or 'radiometer', got {q_variance!r}")
-    spec = EdgesImport(
-        temperatures_k={"amb": T_COLD_K, "hot": T_HOT_K, "open": T_COLD_K, "short": T_COLD_K},
-        band_mhz=band_mhz,
-        s11="modelled" if use_modelled_s11 else "raw",
-        q_variance="empirical" if q_variance == "empirical" else "radiometer",
-        hot_loss=CableLoss(UT141C) if hot_load_loss else None,
-    )
-    return import_edges(directory, spec)

@@ -56,8 +56,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..choice.averaging import MixturePosterior
-from ..choice.model_fit import OrderChoice, fit, fit_extending
-from ..choice.model_size import model_size_metadata
+from ..choice.model_fit import OrderChoice, fit
+from ..choice.model_size import fit_extending, model_size_metadata
 from ..core.blas_threads import with_one_blas_thread
 from ..core.errors import IllPosedError
 from ..model.basis import BasisKind, PolynomialBasis

@@ -24,7 +24,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..choice.model_fit import OrderChoice, fit_extending
+from ..choice.model_fit import OrderChoice
+from ..choice.model_size import fit_extending
 from ..model.basis import BasisKind, PolynomialBasis
 from ..model.data import CalibrationData
 from ..model.polynomial_model import Orders
