@@ -17,6 +17,7 @@
     reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
     reach-cal season RUNS... -o SEASON.h5 [--lst-bin-h H]   (cli.season_parser)
     reach-cal export --format gsdata SEASON.h5 -o OUT.gsh5
+    reach-cal plan RUN.h5 --target-mk X [--antenna ant] [--antenna-k K]  (cli.design_parser)
 
 Files are those of :mod:`calibration.io.hdf5_io`. No command writes over one of its inputs or
 a file holding measurements (:mod:`calibration.cli.files`); every numeric option is
@@ -28,7 +29,7 @@ on stderr without a traceback and exit with status 2, as do usage errors; succes
 Parsing imports nothing of the engine (:mod:`calibration.cli.args`): ``--help`` and
 ``--version`` answer at once, and a command's module (:mod:`.simulate`, :mod:`.solve`,
 :mod:`.apply`, :mod:`.summary`, :mod:`.validate`, :mod:`.report`, :mod:`.import_commands`,
-:mod:`.season`, :mod:`.export`)
+:mod:`.season`, :mod:`.export`, :mod:`.design`)
 is imported when it runs.
 """
 
@@ -57,6 +58,7 @@ from .args import (
     positive_float,
     positive_int,
 )
+from .design_parser import add_contributions_option, add_plan_command
 from .import_parser import add_import_command
 from .season_parser import add_season_commands
 
@@ -175,6 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_solver_options(solve)
     add_correction_options(solve)
+    add_contributions_option(solve)
 
     apply = command("apply")
     apply.add_argument("solution", help="solution file (HDF5)")
@@ -219,6 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_import_command(sub)
     add_season_commands(sub)
+    add_plan_command(sub)
 
     validate = command("validate")
     validate.add_argument("run", help="run file (HDF5)")

@@ -58,6 +58,9 @@ def calibrators_of(args: argparse.Namespace) -> CalibrationData:
 def cmd_solve(args: argparse.Namespace) -> int:
     """Solve a run for the noise-wave parameters and write the solution."""
     check_outputs({"-o": (args.output, "solution")}, [args.run])
+    contributing = getattr(args, "contributions", False)
+    if contributing and args.method != "radiometric":
+        raise InvalidDataError("--contributions needs the radiometric solver: --method radiometric")
     data = calibrators_of(args)
     solve = solver_from_args(args)
     start = time.perf_counter()
@@ -90,6 +93,11 @@ def cmd_solve(args: argparse.Namespace) -> int:
     print(noise_source_line(solution, data.freq_hz))
     for line in warning_lines(solution.metadata):
         print(line)
+    if contributing and isinstance(solution, Solution):
+        from .design import contribution_lines
+
+        for line in contribution_lines(args, data, solution):
+            print(line)
     print(f"wrote {args.output}")
     return 0
 

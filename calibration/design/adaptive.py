@@ -47,11 +47,16 @@ from ..choice.model_fit import OrderChoice
 from ..core.errors import CalibrationError
 from ..model.data import CalibrationData
 from ..model.polynomial_model import Orders
-from ..solve.radiometric_solver import solve_radiometric
+from ..regression.conjugate import CoefficientPrior
+from ..solve.radiometric_solver import RadiometricPrior, solve_radiometric
 from ..solve.solution import Solution
 from .information import AntennaInformation, antenna_information
 
 ComplexArray = NDArray[np.complex128]
+
+#: The refits between refreshes: one model under the thesis's wide prior (no scale search;
+#: the refresh's ``kappa`` carries the averaged solution's own width).
+FIXED_PRIOR = RadiometricPrior(coefficients=CoefficientPrior())
 
 #: Instrument time of one measurement of ``t`` s per Dicke position: source, load, noise source.
 POSITIONS = 3
@@ -139,8 +144,9 @@ class AdaptivePlanner:
     """Chooses the next calibrator measurement from the posterior of the data so far.
 
     ``antenna_s11`` is the antenna's reflection over the data's channels (the band the
-    receiver hands over). ``solver`` is the radiometric solver (its keywords: ``orders``,
-    ``delay_terms``); stateful: the orders between refreshes and :attr:`decisions`.
+    receiver hands over). ``solver`` is the radiometric solver (its keywords: ``orders``, ``prior``,
+    ``average``, ``delay_terms``); stateful: the orders between refreshes, ``kappa`` and
+    :attr:`decisions`.
     """
 
     settings: AdaptiveSettings
@@ -149,6 +155,7 @@ class AdaptivePlanner:
     decisions: list[Decision] = field(default_factory=list)
     orders: Orders | None = None
     kappa: float = 1.0
+    calls: int = 0  # posteriors computed (decisions and predictions): the refresh cadence
 
     def first_pass(self, sources: Sequence[str]) -> list[tuple[str, float]]:
         """The first pass: every calibrator once, ``first_pass_s`` per position."""
@@ -164,14 +171,18 @@ class AdaptivePlanner:
         refresh.
         """
         s = self.settings
-        refresh = self.orders is None or len(self.decisions) % s.refresh_every == 0
+        refresh = self.orders is None or self.calls % s.refresh_every == 0
+        self.calls += 1
         full: Solution | None = None
         if refresh:
             full = self.solver(data)
             self.orders = full.orders_used
         assert self.orders is not None
         try:
-            fixed = self.solver(data, orders=OrderChoice.fixed(self.orders), delay_terms=False)
+            fixed = self.solver(
+                data, orders=OrderChoice.fixed(self.orders), prior=FIXED_PRIOR, average=False,
+                delay_terms=False,
+            )
         except CalibrationError:
             if full is None:
                 full = self.solver(data)
@@ -181,7 +192,7 @@ class AdaptivePlanner:
         info = self._info(fixed, data)
         if full is not None and full is not fixed:
             v_full = self._info(full, data).variance()
-            self.kappa = float(np.sqrt(max(v_full / info.variance(), 1.0)))
+            self.kappa = float(np.sqrt(v_full / info.variance()))
         return info, refresh
 
     def _info(self, solution: Solution, data: CalibrationData) -> AntennaInformation:

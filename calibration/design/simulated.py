@@ -44,6 +44,15 @@ class SimulatedReceiver:
         """The antenna's reflection over the channels."""
         return np.asarray(self.run.validation_noiseless.gamma)
 
+    def antenna(self, temperature_k: float) -> SourceData:
+        """The antenna (the simulator's ``ant`` reflection) at ``temperature_k``, noiseless."""
+        c, freq = self.config, self.run.data.freq_hz
+        return simulate_source(
+            "ant", freq, reach_source_reflection("ant", freq), self.run.gamma_rec_true,
+            temperature_k, self.run.truth, Integration(1.0, 1.0, 1.0), c.channel_width_hz, None,
+            known_temperature=False,
+        )
+
     def measure(self, name: str, seconds: float) -> None:
         """One Dicke cycle of ``name``, ``seconds`` per position, averaged in."""
         c, freq = self.config, self.run.data.freq_hz
