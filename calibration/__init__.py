@@ -18,6 +18,8 @@ it in this list (``tests/test_layers.py`` holds the order, README's "Engine laye
 * :mod:`calibration.regression`: normal equations, conjugate Bayesian regression, priors.
 * :mod:`calibration.choice`: model choice: order search, prior scales, model averaging.
 * :mod:`calibration.solve`: the solvers, their solutions, the noise floor.
+* :mod:`calibration.design`: adaptive calibration, the next calibrator by the antenna's
+  predicted error.
 * :mod:`calibration.checks` and :mod:`calibration.io`: what is checked in data and
   solutions (validation, consistency, RFI, the VNA's systematics); the files (HDF5 run
   and solution files, EDGES and raw VNA importers).
@@ -42,6 +44,7 @@ if TYPE_CHECKING:
         IllPosedError,
         InvalidDataError,
     )
+    from .design.adaptive import AdaptivePlanner, AdaptiveSettings, Candidate, Decision
     from .io.hdf5_io import read_run, write_run
     from .io.solution_file import read_solution, write_solution
     from .model.basis import PolynomialBasis
@@ -64,6 +67,10 @@ _WHERE = {
     "FileFormatError": "core.errors",
     "IllPosedError": "core.errors",
     "InvalidDataError": "core.errors",
+    "AdaptivePlanner": "design.adaptive",
+    "AdaptiveSettings": "design.adaptive",
+    "Candidate": "design.adaptive",
+    "Decision": "design.adaptive",
     "read_run": "io.hdf5_io",
     "write_run": "io.hdf5_io",
     "read_solution": "io.solution_file",
@@ -98,11 +105,15 @@ _WHERE = {
 __all__ = [
     "IDEAL_KIT",
     "PARAMETERS",
+    "AdaptivePlanner",
+    "AdaptiveSettings",
     "CalKit",
     "CalibratedSpectrum",
     "CalibrationData",
     "CalibrationError",
+    "Candidate",
     "CoefficientPrior",
+    "Decision",
     "DegenerateStandardsError",
     "FileFormatError",
     "IllPosedError",
