@@ -154,6 +154,24 @@ def test_temperatures_come_from_the_thermocouples(measured):
     assert cold == pytest.approx(physics.enclosure_k(), abs=0.05)
 
 
+def test_a_source_shorter_than_the_log_period_still_gets_its_temperature(measured):
+    # One spectrum a position, the log's period far longer: no periodic reading falls
+    # inside the hot load's integration, so the cycle reads once at its end.
+    sim = measured["sim"]
+    devices, clock = sim.site().devices, sim.clock
+    teensy = Teensy(devices.teensy.port)
+    spectra = Spectrometer(("127.0.0.1", devices.spectrometer.port), clock=clock,
+                           period_s=PERIOD_S)
+    tc08 = Tc08(load_libusbtc08(devices.tc08.library), clock, period_s=1.0)
+    with teensy, spectra, tc08, TemperatureLogger(tc08, clock, period_s=1e7) as log:
+        cycle = take_dicke_cycle(FrontEnd(teensy), spectra, "hot", 1, log)
+        FrontEnd(teensy).safe()
+    (reading,) = cycle.temperatures["source"]
+    assert reading.timestamp >= max(cycle.spectra["source"].timestamps)
+    assert cycle.temperature_k(2) == pytest.approx(sim.physics.config.t_hot_k, abs=0.5)
+    assert not cycle.temperatures["load"]  # only the source's temperature is needed
+
+
 def test_engine_recovers_the_simulators_noise_waves_within_the_posterior(measured):
     data, _, _, freq = engine_data(measured)
     solution = solve_radiometric(data)

@@ -85,6 +85,7 @@ class TemperatureLogger:
         self.period_s = period_s
         self._readings: list[Tc08Reading] = []
         self._lock = threading.Lock()
+        self._reading = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.failures = 0
@@ -111,15 +112,21 @@ class TemperatureLogger:
 
     def _run(self) -> None:
         while not self._stop.is_set():
+            self.read_now()
+            self.clock.wait(self._stop, self.period_s)
+
+    def read_now(self) -> Tc08Reading | None:
+        """Take one reading at once and log it (None, and a warning, if it failed)."""
+        with self._reading:  # one conversion at a time: the logger's and a measurement's
             try:
                 reading = self.thermometer.read()
             except ReceiverError as err:
                 self.failures += 1
                 log.warning("temperature log: %s", err)
-            else:
-                with self._lock:
-                    self._readings.append(reading)
-            self.clock.wait(self._stop, self.period_s)
+                return None
+        with self._lock:
+            self._readings.append(reading)
+        return reading
 
     def readings(self, start: float = -math.inf, stop: float = math.inf) -> tuple[Tc08Reading, ...]:
         """Readings taken in ``[start, stop]`` (clock time)."""
@@ -175,7 +182,8 @@ def take_dicke_cycle(
     """Integrate ``source``, the reference load and the noise source, ``n_spectra`` each.
 
     With a running :class:`TemperatureLogger`, each position keeps the readings taken
-    while its averaged spectra integrated (:func:`readings_during`).
+    while its averaged spectra integrated (:func:`readings_during`); a source position
+    that saw none gets one reading taken at its end, before the switch moves.
     ``progress`` is called after every spectrum; it may stop the cycle by raising;
     ``between`` after each position's integration (a safe point for the monitor). A
     position during which the front-end moved is integrated again
@@ -214,6 +222,12 @@ def take_dicke_cycle(
             readings[position] = readings_during(
                 temperatures, accumulated.timestamps, spectrometer.period or 0.0
             )
+            if position == "source" and not readings[position]:
+                # An integration shorter than the log's period (or a slowed reader) saw
+                # no reading: read once now, the source still connected, so that a
+                # calibrator is never left without its temperature.
+                now = temperatures.read_now()
+                readings[position] = (now,) if now is not None else ()
         log.info("%s: %s position, %d spectra", source, position, accumulated.n_spectra)
         if between is not None:
             between()
