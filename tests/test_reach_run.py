@@ -201,6 +201,14 @@ def test_observe_calibrates_each_antenna_cycle_and_rechecks_the_vna(tmp_path, ca
     assert passed.count(True) == 2, passed
     assert passed[-1]
     assert all(p or after for p, after in itertools.pairwise(passed)), passed
+    # the night's flags beside the cycles' own: a row per cycle, each holding its own
+    (night,) = [m for m in contents.of_kind("check") if m.name == "rfi_night_ant"]
+    assert night.attrs["details"]["spectra"] == [m.name for m in calibrated]
+    night_flags = contents.read(night)["flags"]
+    own = np.stack([contents.read(m)["flags"] for m in calibrated])
+    assert night_flags.shape == own.shape
+    assert np.all(night_flags[own])
+    assert night_flags.mean() < 0.01  # a clean simulated sky
     arrays = contents.read(calibrated[0])
     sky = 2000.0 * (arrays["frequencies"] / 75e6) ** -2.5
     z = (arrays["mean"] - sky) / arrays["std"]

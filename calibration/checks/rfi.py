@@ -211,8 +211,17 @@ def flag_spectrum(
     return np.asarray(given | found, dtype=bool)
 
 
-def flag_sky(temperature: ArrayLike, threshold: float = 5.0) -> BoolArray:
-    """Flags of a calibrated sky spectrum (K): :func:`flag_spectrum` on its positive channels.
+def flag_sky(
+    temperature: ArrayLike,
+    threshold: float = 5.0,
+    freq_hz: ArrayLike | None = None,
+    broad: bool = True,
+) -> BoolArray:
+    """Flags of a calibrated sky spectrum (K): narrow spikes, then broad humps.
+
+    :func:`flag_spectrum` on its positive channels, then, given the channels' frequencies
+    ``freq_hz`` and unless ``broad`` is off, :func:`calibration.checks.rfi_broad.flag_broad`
+    (humps of 0.2-4 MHz; a hump's width and the sky's power law are in frequency).
 
     The residual is relative to the trend, so the noise level follows the spectrum: a
     sky's radiometer noise is a fixed fraction of its temperature (``1 / sqrt(B tau)``),
@@ -231,7 +240,12 @@ def flag_sky(temperature: ArrayLike, threshold: float = 5.0) -> BoolArray:
     if np.count_nonzero(~unusable) < 9:
         return np.ones(x.shape, dtype=bool)
     bridged = _bridge(np.where(unusable, 1.0, x), unusable)
-    return flag_spectrum(bridged, unusable, threshold=threshold)
+    flags = flag_spectrum(bridged, unusable, threshold=threshold)
+    if not broad or freq_hz is None:
+        return flags
+    from .rfi_broad import flag_broad  # here: it imports this module's noise estimates
+
+    return flag_broad(bridged, freq_hz, flags, threshold)
 
 
 def _running_significance(z: FloatArray, width: int) -> FloatArray:

@@ -7,6 +7,9 @@ stores each calibrated cycle as a ``calibrated`` measurement::
     frequencies (Hz), mean, std (K), flags (1), std_calibration, std_radiometer (K)
     attrs handover (JSON: {"cycles": {source: [dicke number]}, "s11": {name: number}})
 
+and after its cycles the night's flags, a ``check`` ``rfi_night_<source>`` (``flags``
+``(cycle, channel)``, attr details' ``spectra`` naming the rows), ORed in here.
+
 ``std_calibration`` is the solution's error: one draw of the noise-wave posterior,
 shared by every spectrum that solution calibrates (thesis eq. 3.41's ``x^T Cov(c) x``);
 ``std_radiometer`` the cycle's own radiometer noise (the radiometer equation through
@@ -173,6 +176,8 @@ def _read(f: h5py.File, where: str) -> RunSpectra:
             ))
         elif kind == "calibrated":
             rows.append(_spectrum(g, by_number, where, len(solutions) - 1))
+        elif kind == "check" and _text(g.attrs["name"]).startswith("rfi_night_"):
+            _night_flags(g, rows)
     if not rows:
         raise InvalidDataError(
             f"{where}: no calibrated spectra (observe calibrates its cycles once the run has "
@@ -206,6 +211,19 @@ def _read(f: h5py.File, where: str) -> RunSpectra:
         solutions=tuple(solutions),
         sweeps=tuple(r["sweeps"] for r in rows),
     )
+
+
+def _night_flags(g: h5py.Group, rows: list[dict[str, Any]]) -> None:
+    """OR a night's flags (observe's ``rfi_night_<source>`` check) into the spectra it names."""
+    names = json.loads(_text(g.attrs.get("details", "{}"))).get("spectra", [])
+    if "flags" not in g or not names:
+        return
+    flags = np.asarray(g["flags"][()], dtype=bool)
+    latest = {row["name"]: row for row in rows}  # the latest of a name: the one flagged
+    for name, row_flags in zip(names, flags, strict=False):
+        row = latest.get(name)
+        if row is not None and row["flags"].shape == row_flags.shape:
+            row["flags"] = row["flags"] | row_flags
 
 
 def _spectrum(

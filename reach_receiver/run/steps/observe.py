@@ -19,7 +19,10 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from calibration.checks.rfi import flag_sky
+from calibration.checks.rfi_night import flag_night
 from calibration.solve.solvers import band_hz
 from reach_receiver.config.fields import Fields
 from reach_receiver.schedule.parsing import ParseContext
@@ -45,16 +48,28 @@ class Observe(Step):
     rfi_threshold_sigma: float = 5.0
 
 
-def calibrate_cycle(run: RunContext, source: str, number: int, name: str, threshold: float) -> None:
+@dataclass(frozen=True)
+class CalibratedCycle:
+    """What the night's flags need of a calibrated cycle."""
+
+    name: str
+    freq_hz: np.ndarray
+    mean: np.ndarray
+    flags: np.ndarray
+
+
+def calibrate_cycle(
+    run: RunContext, source: str, number: int, name: str, threshold: float
+) -> CalibratedCycle | None:
     """Calibrate one stored cycle with the run's solution; store it with its RFI flags."""
     solution = run.solution
     if solution is None:
-        return
+        return None
     band = band_hz(solution)
     view = run.store.engine_view(band, cycles={source: [number]})
     if view.layout is None or source not in view.others:
         log.warning("observe: %s not calibrated (%s)", name, "; ".join(view.handover.warnings))
-        return
+        return None
     layout = view.layout
     data = view.others[source]
     spectrum = solution.calibrate(
@@ -64,13 +79,37 @@ def calibrate_cycle(run: RunContext, source: str, number: int, name: str, thresh
         layout.freq_hz, layout.gamma_rec, dataclasses.replace(data, gamma_std=None),
         layout.channel_width_hz,
     ).std_measurement
-    flags = flag_sky(spectrum.mean, threshold)
+    flags = flag_sky(spectrum.mean, threshold, layout.freq_hz)
     run.store.add_calibrated(
         name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now(),
         intervals=spectrum.intervals(), handover=view.handover,
         errors={"std_calibration": spectrum.std_calibration, "std_radiometer": radiometer},
     )
     log.info("observe: %s calibrated, %d channels flagged", name, flags.sum())
+    return CalibratedCycle(name, np.asarray(layout.freq_hz), np.asarray(spectrum.mean), flags)
+
+
+def flag_cycles_together(
+    run: RunContext, source: str, cycles: Sequence[CalibratedCycle], threshold: float
+) -> None:
+    """The night's flags of a step's calibrated cycles, stored as ``rfi_night_<source>``."""
+    if not cycles:
+        return
+    freq = cycles[0].freq_hz
+    same = [c for c in cycles if c.freq_hz.shape == freq.shape and np.allclose(c.freq_hz, freq)]
+    night = flag_night(
+        np.stack([c.mean for c in same]), np.stack([c.flags for c in same]), freq, threshold
+    )
+    summary = night.summary()
+    run.store.add_check(
+        f"rfi_night_{source}", True, timestamp=run.clock.now(),
+        details={"spectra": [c.name for c in same], "threshold_sigma": threshold, **summary},
+        arrays={"flags": night.flags},
+    )
+    log.info(
+        "observe: %d cycles flagged together: %d channels at every time, %d spectra whole",
+        len(same), summary["channels_flagged_at_every_time"], summary["spectra_flagged_whole"],
+    )
 
 
 class ObserveKind(RunnableKind[Observe]):
@@ -114,11 +153,15 @@ class ObserveKind(RunnableKind[Observe]):
         return dataclasses.replace(step, cycles=left) if left > 0 else None
 
     def execute(self, step: Observe, run: RunContext) -> None:
-        """Each cycle: the test load when due, the cycle, its calibration."""
+        """Each cycle: the test load when due, the cycle, its calibration; the night's flags."""
+        calibrated: list[CalibratedCycle] = []
         for index in range(step.cycles):
             if index and step.test_load_every and index % step.test_load_every == 0:
                 check_test_load(run, TestLoadCheck(step.where))
             label = f"cycle {index + 1}/{step.cycles}"
             number = dicke_cycle(run, step.source, step.seconds, label)
             name = f"{step.source}_{index:04d}"
-            calibrate_cycle(run, step.source, number, name, step.rfi_threshold_sigma)
+            cycle = calibrate_cycle(run, step.source, number, name, step.rfi_threshold_sigma)
+            if cycle is not None:
+                calibrated.append(cycle)
+        flag_cycles_together(run, step.source, calibrated, step.rfi_threshold_sigma)
