@@ -42,7 +42,7 @@ from calibration.solve.noise_floor import noise_floor
 from calibration.solve.radiometric_solver import RadiometricPrior, solve_radiometric
 
 COARSE = ITPM_CHANNEL_WIDTH_HZ * 8  # 820 channels: the same physics, faster runs
-RANDOM_RUNS = 60
+RANDOM_RUNS = 30
 
 
 def normal_equations_of(data, largest=(6, 6, 6, 6, 6)):
@@ -243,16 +243,17 @@ def test_a_term_below_the_old_threshold_is_covered_by_the_averaged_predictive():
     """T_NS's quadratic term at 3 posterior sigma: the fixed 3000 K prior drops it.
 
     With the 2-minute Dicke positions of the issue's simulator, the term's posterior sd
-    is 0.25 K; the truth's term is 0.75 K (alternating in sign). Over 60 seeded runs, at
+    is 0.25 K; the truth's term is 0.75 K (alternating in sign). Over 30 seeded runs, at
     8 channels each, the old choice's 68 % intervals cover the calibrated source's truth
-    well below 68 %, the averaged predictive's at 68 % (both tolerances are about two
-    binomial sigma of the correlated channels).
+    well below 68 % (57 %), the averaged predictive's at 68 % (69/93 %; the tolerances,
+    6 and 3 points, are about 1.5 binomial sigma of the correlated channels at 30 runs:
+    60 runs, which took twice the suite's time, gave the same verdicts).
     """
     base = {"unc": [250, -12, 6], "cos": [190, 25, -8], "sin": [90, -15, 10],
             "L": [300, 1.5, -0.8]}
     hits = {"old": [], "averaged": []}
     chosen = {"old": 0, "averaged": 0}
-    for seed in range(60):
+    for seed in range(30):
         term = 0.75 if seed % 2 else -0.75
         config = SimulationConfig(
             channel_width_hz=COARSE, integration_s=120.0,
@@ -275,7 +276,8 @@ def test_a_term_below_the_old_threshold_is_covered_by_the_averaged_predictive():
             ])
             chosen[name] += solution.best_orders[3] >= 3
     old, averaged = np.mean(hits["old"], axis=0), np.mean(hits["averaged"], axis=0)
-    assert chosen["old"] <= 10, chosen  # the old prior drops the term
+    print(f"old {old}, averaged {averaged}, old kept the term {chosen['old']} times")
+    assert chosen["old"] <= 5, chosen  # the old prior drops the term
     assert old[0] < 0.62, old
     assert abs(averaged[0] - 0.68) <= 0.06, averaged
     assert abs(averaged[1] - 0.95) <= 0.03, averaged
@@ -343,8 +345,9 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
     sigma, where the evidence of polynomials alone drops them (the single best model
     covered 54 %/82 % of its 68 %/95 % intervals over 40 such runs of the model-choice
     benchmark). Averaged, with the smooth-function hypothesis, the intervals cover near
-    the nominal rates. 60 seeded runs at 205 channels, 8 channels each; tolerances about
-    two binomial sigma of the correlated channels. Here, with a prior scale per parameter
+    the nominal rates. 30 seeded runs at 205 channels, 8 channels each (60, at twice the
+    suite's time, gave 59/90 % and 63/93 %; these 30 give 60/91 % and 64/94 %). Here, at
+    60 runs, with a prior scale per parameter
     (the default), the best model covers 59/90 % and the average 65/93 % (its mixture's
     quantiles; 65/94 % read as mean +- z sd; with type-II
     widths 61/90 % and 65/95 %; with the widths fitted at the largest model alone 61/89 %
@@ -358,7 +361,8 @@ def test_random_truths_with_weak_terms_are_covered_by_the_averaged_predictive():
     the earlier even odds it covered 64.8/93.1 %, at odds of one to sqrt(n_models)
     63.3/92.9 %. Even odds gave the smooth functions 0.975-0.998 of the weight on exact
     quadratics (benchmarks/polynomial_truths.py), so the share stays and 68 % is held to
-    6 points, about 2.4 binomial sigma: the shortfall is the price of that choice.
+    6 points (2.4 binomial sigma at 60 runs, 1.7 at these 30; the model-choice benchmark's
+    100 runs a family hold it tighter): the shortfall is the price of that choice.
     """
     from benchmarks.model_choice import Ensemble, draw_truth, pilot_sd
 

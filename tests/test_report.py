@@ -116,7 +116,8 @@ def test_source_and_floor_numbers_equal_a_recomputation(files, report):
     assert name == "ant"
     antenna = solution.calibrate(data.freq_hz, data.gamma_rec, others["ant"])
     assert float(share) == pytest.approx(antenna.model_choice_share, abs=5e-4)
-    expected = noise_floor(data, others["ant"], solution.parameters).rms
+    used = solution.parameters.truncated(solution.orders_used)  # the model used, not the envelope
+    expected = noise_floor(data, others["ant"], used).rms
     assert float(floor) == pytest.approx(1e3 * expected, rel=1e-3)
     assert float(distance) == pytest.approx(float(predicted) / float(floor), rel=2e-3)
     assert float(actual) > 0

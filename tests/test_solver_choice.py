@@ -245,6 +245,25 @@ def test_channel_floor_is_the_bayesian_posteriors_size():
     assert floor.rms > 3 * polynomial.rms  # each channel learnt from that channel alone
 
 
+@pytest.mark.parametrize("seed", [8, 9, 10])
+def test_an_averaged_solutions_floor_is_that_of_the_model_it_uses(seed):
+    """The floor counts the terms of the model used, not the envelope of those averaged."""
+    from calibration.solve.noise_floor import noise_floor
+
+    run = simulate_run(SimulationConfig(channel_width_hz=64 * ITPM_CHANNEL_WIDTH_HZ), rng=seed)
+    data = run.data
+    solution = solve(data, "radiometric")
+    assert solution.metadata.get("averaged")
+    used, envelope = solution.orders_used, solution.orders
+    assert used != envelope and all(n <= m for n, m in zip(used, envelope, strict=True))
+    floor = solution_noise_floor(solution, data, run.validation)
+    at_used = noise_floor(data, run.validation, solution.parameters.truncated(used))
+    np.testing.assert_allclose(floor.std, at_used.std)
+    # Fewer coefficients, less to learn: the envelope's floor is the higher, so the old
+    # distance to it (predicted / floor) read low.
+    assert floor.rms < noise_floor(data, run.validation, solution.parameters).rms
+
+
 # --------------------------------------------------------------------------- schedules, sites
 BAD_STEP = """\
 schedule: s

@@ -104,6 +104,15 @@ class PolynomialParameters:
         ]
         return np.stack(out, axis=-2)
 
+    def truncated(self, orders: Sequence[int]) -> PolynomialParameters:
+        """The leading ``orders[k]`` terms of each parameter (a sub-model of these orders)."""
+        orders = as_orders(orders)
+        if any(n > m for n, m in zip(orders, self.orders, strict=True)):
+            raise ValueError(f"orders {orders} exceed the parameters' {self.orders}")
+        kept = [self.coefficients[..., s.start : s.start + n]
+                for s, n in zip(coefficient_slices(self.orders), orders, strict=True)]
+        return PolynomialParameters(self.basis, orders, np.concatenate(kept, axis=-1))
+
     def per_parameter(self) -> dict[str, FloatArray]:
         """Coefficients of each parameter by name."""
         return {

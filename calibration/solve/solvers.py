@@ -205,7 +205,11 @@ def solution_noise_floor(
 ) -> NoiseFloor:
     """The radiometer floor of ``source`` for ``solution``'s own kind of model.
 
-    Polynomial: :func:`~calibration.solve.noise_floor.noise_floor` at the solution's orders;
+    Polynomial: :func:`~calibration.solve.noise_floor.noise_floor` at the orders of the
+    model the solution uses (:attr:`~calibration.solve.solution.Solution.orders_used`, the
+    heaviest of an average), not at the envelope of the models averaged: every term of
+    that envelope (up to the box's edge) would count in the Fisher information, and a
+    floor for a model of 40 coefficients where 15 are used reads the distance to it low;
     per channel: :func:`~calibration.solve.noise_floor.channel_noise_floor`. Either is
     evaluated at ``solution``'s mean unless ``theta`` (``(5, N)`` on ``data``'s channels,
     per channel only) is given.
@@ -213,4 +217,10 @@ def solution_noise_floor(
     if isinstance(solution, ChannelSolution):
         at = solution.evaluate(data.freq_hz) if theta is None else np.asarray(theta, float)
         return channel_noise_floor(data, source, at, own_reflection=own_reflection)
-    return noise_floor(data, source, solution.parameters, own_reflection=own_reflection)
+    parameters = solution.parameters
+    used = solution.orders_used
+    if used != parameters.orders and all(
+        n <= m for n, m in zip(used, parameters.orders, strict=True)
+    ):
+        parameters = parameters.truncated(used)
+    return noise_floor(data, source, parameters, own_reflection=own_reflection)
