@@ -112,3 +112,18 @@ def test_trace_noise_is_read_off_a_sweep_of_a_long_cable(sigma):
     rng = np.random.default_rng(0)
     noisy = 0.9 * np.exp(-2j * np.pi * coarse * 95e-9) + sigma * rng.standard_normal(101)
     assert trace_noise(noisy) is None
+
+
+@pytest.mark.parametrize("solver", ["radiometric", "least-squares"])
+def test_the_radiometer_part_is_kept_apart_from_the_reflections_errors(solver):
+    """``std_radiometer``: ``std_measurement`` as it is without the VNA's random errors."""
+    from calibration.solve.solvers import solve
+
+    config = SimulationConfig(channel_width_hz=4 * WIDTH, vna_sigma=VNA_SIGMA)
+    run = simulate_run(config, rng=3)
+    data, ant = run.data, run.validation
+    solution = solve(data, solver)
+    both = solution.calibrate(data.freq_hz, data.gamma_rec, ant, WIDTH * 4, data.gamma_rec_std)
+    alone = solution.calibrate(data.freq_hz, data.gamma_rec, _stripped(ant), WIDTH * 4)
+    np.testing.assert_allclose(both.std_radiometer, alone.std_measurement, rtol=1e-12)
+    assert np.all(both.std_measurement > both.std_radiometer)  # the reflections' part joined

@@ -205,6 +205,7 @@ class ChannelSolution:
         else:
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * theta[INDEX["NS"]]) * np.sqrt(var_q)
+        radiometer = std_meas
         if source.gamma_std is not None or gamma_rec_std is not None:
             var_gamma = reflection_variance(
                 theta, source.gamma, g_rec, source.q, source.gamma_std, gamma_rec_std
@@ -215,7 +216,9 @@ class ChannelSolution:
             theta = self.sample_parameters(f, n, rng)
             return np.asarray(np.einsum("npf,fp->nf", theta, rows))
 
-        return CalibratedSpectrum(f, mean, std_cal, std_meas, self.dof, rows, draw)
+        return CalibratedSpectrum(
+            f, mean, std_cal, std_meas, self.dof, rows, draw, std_radiometer=radiometer
+        )
 
     def summary(self) -> dict[str, Any]:
         """Plain-data summary, as :meth:`calibration.solve.solution.Solution.summary`.

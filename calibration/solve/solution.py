@@ -55,7 +55,10 @@ class CalibratedSpectrum:
     across channels, part of every interval and sample, their RMS ``std_systematic``.
     ``mixture``, for a model-averaged solution, gives the calibration error's components
     per channel (:mod:`calibration.choice.mixture_interval`), so that intervals are the
-    mixture's quantiles; computed when an interval is asked for.
+    mixture's quantiles; computed when an interval is asked for. ``std_radiometer`` is the
+    radiometer part of ``std_measurement``, without the reflections' random errors (which a
+    run's spectra share through the same S11 sweeps, while the radiometer noise of each
+    spectrum is its own); None where the solver does not separate them.
     """
 
     freq_hz: FloatArray
@@ -67,6 +70,7 @@ class CalibratedSpectrum:
     draw_calibration: Callable[[int, np.random.Generator], FloatArray] = field(repr=False)
     systematic: FloatArray | None = field(default=None, repr=False)
     mixture: Callable[[], ChannelMixture] | None = field(default=None, repr=False)
+    std_radiometer: FloatArray | None = field(default=None, repr=False)
 
     def with_systematics(self, deviations: FloatArray) -> CalibratedSpectrum:
         """A copy with the VNA systematic error's draws ``(K, n_channels)`` attached."""
@@ -312,6 +316,7 @@ class Solution:
             t_ns = self.evaluate(freq)[INDEX["NS"]]
             var_q = source.q_variance(channel_width_hz)
             std_meas = np.abs(terms.x_l * t_ns) * np.sqrt(post.noise_variance * var_q)
+        radiometer = std_meas
         if source.gamma_std is not None or gamma_rec_std is not None:
             var_gamma = reflection_variance(
                 self.evaluate(freq), source.gamma, gamma_rec, source.q, source.gamma_std,
@@ -330,6 +335,7 @@ class Solution:
             rows,
             lambda n, rng: np.asarray(post.sample(n, rng) @ rows.T),
             mixture=mixture,
+            std_radiometer=radiometer,
         )
 
     def summary(self) -> dict[str, Any]:

@@ -75,10 +75,8 @@ def calibrate_cycle(
     spectrum = solution.calibrate(
         layout.freq_hz, layout.gamma_rec, data, layout.channel_width_hz, layout.gamma_rec_std,
     )
-    radiometer = solution.calibrate(  # without the S11s' trace noise (shared by cycles)
-        layout.freq_hz, layout.gamma_rec, dataclasses.replace(data, gamma_std=None),
-        layout.channel_width_hz,
-    ).std_measurement
+    radiometer = spectrum.std_radiometer  # without the S11s' trace noise (shared by cycles)
+    assert radiometer is not None  # both solvers separate it
     flags = flag_sky(spectrum.mean, threshold, layout.freq_hz)
     run.store.add_calibrated(
         name, layout.freq_hz, spectrum.mean, spectrum.std, flags, timestamp=run.clock.now(),
