@@ -172,6 +172,13 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             print(f"skipped a run: {err}")
             continue
         rows.append((ada, rr))
+        if args.coverage and len(rows) % 50 == 0:  # progress: the adaptive runs' so far
+            total = COVERAGE_CHANNELS * len(rows)
+            print(
+                f"{len(rows)} runs: adaptive inside 68 % "
+                f"{100 * sum(r[0].inside_68 for r in rows) / total:.1f}, 95 % "
+                f"{100 * sum(r[0].inside_95 for r in rows) / total:.1f}", flush=True,
+            )
     wall = time.perf_counter() - start
     n = len(rows)
     print(

@@ -189,6 +189,7 @@ class AdaptivePlanner:
                 refresh = True
             fixed = full
             self.orders = full.orders
+            self.kappa = 1.0  # the averaged solution itself: no correction
         info = self._info(fixed, data)
         if full is not None and full is not fixed:
             v_full = self._info(full, data).variance()
