@@ -228,3 +228,135 @@ def test_flag_sky_flags_unusable_channels_and_keeps_judging_the_rest():
     flags = flag_sky(sky)
     assert set(np.flatnonzero(flags)) == {10, 11, 2000, 3000}
     assert flag_sky(np.full(8, 100.0)).all()  # too few channels to judge
+
+
+# Broad humps (calibration.checks.rfi_broad) and flags across a night (rfi_night). The
+# numbers over many more spectra, and xrfi's beside them: benchmarks/rfi.py.
+
+
+def family_sky(rng, seconds=None, trough=None, n=4096):
+    """A sky of the clean family with its frequencies (Hz), radiometer sigma and trough."""
+    lo = rng.uniform(40.0, 80.0)
+    hi = rng.uniform(lo + 50.0, 200.0)
+    trough = rng.random() < 0.5 if trough is None else trough
+    seconds = 10 ** rng.uniform(0.0, np.log10(3600.0)) if seconds is None else seconds
+    f = np.linspace(lo, hi, n)
+    return f * 1e6, clean_sky(rng, rng.uniform(-2.8, -2.2), lo, hi, seconds, trough, n), (
+        1 / np.sqrt((f[1] - f[0]) * 1e6 * seconds)
+    )
+
+
+def add_hump(rng, f_hz, x, sigma, width_mhz, peak_sigma):
+    f = f_hz / 1e6
+    centre = rng.uniform(f[0] + width_mhz, f[-1] - width_mhz)
+    added = peak_sigma * np.exp(-4 * np.log(2) * ((f - centre) / width_mhz) ** 2)
+    x *= 1 + sigma * added
+    return np.abs(f - centre) <= width_mhz / 2, added
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_broad_stage_leaves_clean_skies_and_the_trough_alone(seed):
+    """12 skies of the family with their frequencies, and 4 with the trough at 1 h (its
+    worst: its flanks' response grows as sqrt(tau)), 5 sigma: none flagged. The benchmark
+    flagged none of 40 either."""
+    rng = np.random.default_rng(300 + seed)
+    flagged = 0
+    for k in range(16):
+        f, sky, _ = family_sky(rng, seconds=3600.0 if k >= 12 else None,
+                               trough=True if k >= 12 else None)
+        flagged += int(flag_sky(sky, freq_hz=f).sum())
+    assert flagged <= 1
+
+
+@pytest.mark.parametrize(("width_mhz", "peak_sigma"), [(2.0, 3.0), (5.0, 8.0), (10.0, 50.0)])
+def test_broad_humps_are_found_where_the_trend_of_spikes_cannot_see_them(width_mhz, peak_sigma):
+    """Six skies of the family each: the hump's core (its FWHM) at least half flagged in
+    five of six (the benchmark: every one, of 10); the narrow stage alone finds none of the
+    two weaker kinds; where the hump adds under 0.1 sigma, at most 3 % of the band (a
+    50 sigma hump's wings are flagged further out)."""
+    rng = np.random.default_rng(int(width_mhz * 100 + peak_sigma))
+    found = narrow_found = 0
+    for _ in range(6):
+        f, sky, sigma = family_sky(rng)
+        core, added = add_hump(rng, f, sky, sigma, width_mhz, peak_sigma)
+        flags = flag_sky(sky, freq_hz=f)
+        found += int(np.mean(flags[core]) >= 0.5)
+        narrow_found += int(np.mean(flag_sky(sky, broad=False)[core]) >= 0.5)
+        assert np.count_nonzero(flags & (added < 0.1)) <= 0.03 * sky.size
+    assert found >= 5
+    if peak_sigma < 50:
+        assert narrow_found == 0
+
+
+def test_flag_broad_needs_frequencies_in_order():
+    from calibration.checks.rfi_broad import flag_broad
+
+    with pytest.raises(InvalidDataError, match="frequency"):
+        flag_broad(np.ones(100), np.linspace(2e8, 1e8, 100))
+    assert not flag_broad(np.full(1000, 300.0), np.linspace(5e7, 1.3e8, 1000)).any()
+
+
+def night_of(rng, n_t=24, n=2048, seconds=200.0):
+    """A night's calibrated spectra: the sky's level and index change with LST, a trough."""
+    f = np.linspace(50.0, 130.0, n)
+    lst = np.linspace(0.0, 1.0, n_t)[:, None]
+    phase = rng.uniform(0, 2 * np.pi)
+    t = 5000 * (1 + 0.2 * np.sin(3 * lst + phase)) * (f / 50) ** (-2.5 - 0.05 * lst)
+    t = t - 0.5 * np.exp(-0.5 * ((f - 78.0) / 8.5) ** 2)
+    sigma = 1 / np.sqrt((f[1] - f[0]) * 1e6 * seconds)
+    return f * 1e6, t * (1 + sigma * rng.standard_normal(t.shape)), sigma
+
+
+def own_flags(f, x):
+    return np.stack([flag_sky(row, freq_hz=f) for row in x])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_night_flags_what_its_spectra_alone_miss_and_nothing_clean(seed):
+    """A line at 2 sigma per spectrum on all night (10 sigma in the mean of 24), a channel
+    flagged in 14 of 24 spectra, a band-wide burst of 1 sigma per channel in one spectrum
+    (a smooth model absorbs it), a 2 MHz hump of 3 sigma in another (its level's
+    neighbours are judged without it only 4 spectra away): the line and the
+    channel are flagged at every time, the burst's spectrum whole, the hump found; no
+    other pixel is flagged (the sky changing by 20 % over the night, with a trough)."""
+    from calibration.checks.rfi_night import flag_night
+
+    rng = np.random.default_rng(400 + seed)
+    f, x, sigma = night_of(rng)
+    n_t, n = x.shape
+    x[:, 700] *= 1 + 2 * sigma
+    # rows 4 apart: the cubic through a burst's neighbours sees it in two on each side
+    burst, hump_row = rng.choice(np.arange(2, n_t - 2, 4), 2, replace=False)
+    x[burst] *= 1 + sigma
+    core, added = add_hump(rng, f, x[hump_row], sigma, 2.0, 3.0)
+    own = own_flags(f, x)
+    majority = int(rng.integers(0, n))
+    own[rng.choice(n_t, 14, replace=False), majority] = True
+    night = flag_night(x, own, f)
+    assert np.all(night.flags[own])
+    assert night.channels[700]
+    assert night.channels[majority]
+    assert np.flatnonzero(night.spectra).tolist() == [burst]
+    assert np.mean(night.flags[hump_row, core]) >= 0.5
+    expected = np.zeros(x.shape, bool)
+    expected[:, [700, majority]] = True
+    expected[burst] = True
+    expected[hump_row] |= added >= 0.1
+    assert np.count_nonzero(night.flags & ~expected) <= 0.001 * x.size
+    assert night.summary()["spectra_flagged_whole"] == 1
+
+
+def test_a_short_night_gets_the_majority_rule_only_and_bad_input_is_refused():
+    from calibration.checks.rfi_night import flag_night
+
+    rng = np.random.default_rng(9)
+    f, x, _ = night_of(rng, n_t=2, n=512)
+    own = np.zeros(x.shape, bool)
+    own[:, 100] = True
+    night = flag_night(x, own, f)
+    assert np.flatnonzero(night.channels).tolist() == [100]
+    assert not night.spectra.any()
+    with pytest.raises(InvalidDataError, match="shape"):
+        flag_night(x, own[:, :10], f)
+    with pytest.raises(InvalidDataError, match="time, channel"):
+        flag_night(x[0], None, f)

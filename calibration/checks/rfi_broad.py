@@ -58,6 +58,8 @@ MIN_WIDTH = 16
 #: The widest window (Hz): a fifth of the 21-cm trough's width. At 8 MHz the model's
 #: misfit around EDGES' trough reached 3.4 sigma at 1 h and, with noise, was flagged.
 MAX_WIDTH_HZ = 4e6
+#: Channels this many sigma above the model are left out of its fit (:func:`_robust_model`).
+CLIP = 3.0
 #: A run of ``s`` above ``LOW threshold`` reaching ``threshold`` is flagged, widened by
 #: ``GROW`` windows on each side.
 LOW = 0.5
@@ -102,6 +104,27 @@ def broad_significance(z: FloatArray, valid: BoolArray, width: int) -> FloatArra
     with np.errstate(invalid="ignore", divide="ignore"):
         s = (c_sum / c_n - (l_sum + r_sum) / s_n) / np.sqrt(1 / c_n + 1 / s_n)
     return np.asarray(np.where(usable, s, 0.0))
+
+
+def _robust_model(
+    x: FloatArray, flags: BoolArray, freq: FloatArray, degree: int, noise: float, iterations: int
+) -> FloatArray:
+    """:func:`smooth_model` refitted without channels ``CLIP`` sigma above it.
+
+    RFI adds power: a hump strong enough to drag the model over the whole band (50
+    sigma over 10 MHz) left a misfit at the band's edges that was flagged where the hump
+    was not. Clipping single channels, not running means, leaves the trough's flanks
+    (a fraction of a sigma per channel) in the fit.
+    """
+    fit = flags.copy()
+    model = smooth_model(x, fit, freq, degree)
+    for _ in range(iterations):
+        new = flags | ((x / model - 1) > CLIP * noise)
+        if np.array_equal(new, fit) or np.count_nonzero(~new) <= 2 * (degree + 1):
+            break
+        fit = new
+        model = smooth_model(x, fit, freq, degree)
+    return model
 
 
 def _widths(n: int, freq_hz: FloatArray) -> list[int]:
@@ -150,7 +173,8 @@ def flag_broad(
     found = np.zeros(x.shape, bool)
     for _ in range(max_iterations):
         current = given | found
-        z = (x / smooth_model(x, current, freq, degree) - 1) / noise
+        model = _robust_model(x, current, freq, degree, noise, max_iterations)
+        z = (x / model - 1) / noise
         new = np.zeros(x.shape, bool)
         for width in widths:
             valid = ~(given | new)
