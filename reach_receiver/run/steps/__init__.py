@@ -12,6 +12,7 @@ The step classes are re-exported, with the language's :class:`Schedule` and
 from reach_receiver.schedule.kinds import KindRegistry
 from reach_receiver.schedule.steps import Schedule, Step, Where
 
+from .adaptive import CalibrateAdaptive, CalibrateAdaptiveKind
 from .calibrate import Calibrate, CalibrateKind
 from .observe import Observe, ObserveKind
 from .repeat import Repeat, RepeatKind
@@ -59,6 +60,7 @@ STANDARD_KINDS = KindRegistry(
         WaitKind(),
         RepeatKind(),
         CalibrateKind(),
+        CalibrateAdaptiveKind(),
         ObserveKind(),
         SafeKind(),
     ]
@@ -67,6 +69,7 @@ STANDARD_KINDS = KindRegistry(
 __all__ = [
     "STANDARD_KINDS",
     "Calibrate",
+    "CalibrateAdaptive",
     "Connect",
     "Dicke",
     "Initialise",
