@@ -47,7 +47,9 @@ and :func:`run_power_spectra`):
 **Integration-time convention.** ``integration_s_*`` is the integration time of *one row*
 of the matching spectra dataset; a 1-D dataset is one row. A 2-D dataset of ``n_spectra``
 rows (REACH's repeated spectra) is averaged over its first axis on reading, with integration
-time ``n_spectra * integration_s_*``. We write 1-D (averaged) spectra with their total time.
+time ``n_spectra * integration_s_*``; with ``row_integration_s_*`` (each row's time, rows of
+unequal length) the average is weighted by it and the time is its sum. We write 1-D
+(averaged) spectra with their total time.
 
 Solution files and calibrated spectra are written and read by :mod:`calibration.io.solution_file`,
 which shares this module's atomic writes and checked readers.
@@ -312,6 +314,12 @@ def _read_source(obs: Any, meta: Any, temps: Any, name: str, path: PathLike) -> 
         per_row = _number(holder, key, path)
         if arr.ndim not in (1, 2) or arr.shape[0] == 0:
             raise FileFormatError(f"{path}: {name}_{suffix} has shape {arr.shape}: not 1-D/2-D")
+        rows = np.asarray(first.attrs.get(f"row_integration_s_{position}", []), dtype=float)
+        if arr.ndim == 2 and rows.shape == (arr.shape[0],) and np.all(rows > 0):
+            # Rows of unequal integration: P = sum t_k P_k / sum t_k, one spectrum of sum t_k
+            powers.append(rows @ arr / rows.sum())
+            seconds.append(float(rows.sum()))
+            continue
         powers.append(arr.mean(axis=0) if arr.ndim == 2 else arr)
         seconds.append(per_row * (arr.shape[0] if arr.ndim == 2 else 1))
     gamma = _array(obs, f"{name}_s11", path, "iufc").astype(complex)

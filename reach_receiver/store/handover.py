@@ -315,6 +315,8 @@ def write_layout(f: Any, groups: Groups, handover: HandOver) -> None:
         for position, _ in POSITIONS:
             per_row = [float(g[position].attrs["integration_s"]) for g in rows]
             spectra.attrs[f"integration_s_{position}"] = float(np.mean(per_row))
+            if len(set(per_row)) > 1:  # cycles of unequal length: averaged weighted by time
+                spectra.attrs[f"row_integration_s_{position}"] = per_row
         spectra.attrs["measurements"] = _str_array([g.name for g in rows])
         times = np.array([[_mean_time(g, p) for p, _ in POSITIONS] for g in rows])
         dataset(
