@@ -1,8 +1,9 @@
 """Adaptive calibration against the fixed round-robin: instrument time to a target error.
 
-Run ``python -m benchmarks.adaptive [--runs 20] [--seed 0] [--target-fraction 0.4]``
-(about 15 s a run on one core), or ``--coverage --runs 200`` for the coverage of the
-adaptive runs' final intervals (about 4 s a run).
+Run ``python -m benchmarks.adaptive [--runs 20] [--seed 0] [--target-fraction 0.4]
+[--antenna-k 298]`` (24-38 s a run on a shared two-core machine, about 10 minutes for
+20 runs), or ``--coverage --runs 200 --target-fraction 0.6`` for the coverage of the
+adaptive runs' final intervals (7-11 s a run, 23-37 minutes).
 
 Each run draws a truth (:mod:`benchmarks.model_choice`'s random truths: random orders 1-6
 and term sizes 0.3-30 posterior sd), REACH's twelve calibrators and the antenna's
