@@ -73,7 +73,8 @@ class OrderChoice:
     the box is automatic: it starts at :data:`DEFAULT_MAX_ORDERS`, and where the
     evidence-best model reaches its edge in some parameter, that parameter's limit is
     raised by ``extend_step`` and the search resumed, up to ``ceiling`` terms, only while
-    the calibrators constrain the raised terms (:func:`~calibration.choice.model_size.fit_extending` states the rule).
+    the calibrators constrain the raised terms
+    (:func:`~calibration.choice.model_size.fit_extending` states the rule).
     """
 
     orders: Orders | None = None

@@ -37,7 +37,8 @@ def add_contributions_option(solve: argparse.ArgumentParser) -> None:
     solve.add_argument(
         "--contributions", action="store_true",
         help="also print each calibrator's share of the antenna's information and the "
-        "antenna's predicted error without it (needs the antenna's reflection in the run)",
+        "antenna's predicted error without it (needs the antenna's reflection in the run; "
+        "default: not printed)",
     )
     add_antenna_options(solve)
 
