@@ -16,8 +16,10 @@ in what is left of ``budget_s``.
 
 The instrument time is the run clock's across each Dicke cycle (switching and settling
 included); the engine's own computing is not charged (a compressed simulated clock would
-make it hours). ``overhead_s`` defaults to the schedule timing's (two spectra per
-position: ``6 x devices.spectrometer.period_s``). ``band_hz`` is the band of interest, by
+make it hours). ``overhead_s``, the switching and settling each cycle costs beyond its
+``3 t`` of integration, is by default measured: the median over the step's cycles so far
+(before any, the schedule timing's two spectra per position,
+``6 x devices.spectrometer.period_s``). ``band_hz`` is the band of interest, by
 default the site's calibration band (``calibration.band_hz``); ``antenna_k`` the
 antenna's assumed temperature (its design row, 298 K by default).
 
@@ -134,8 +136,7 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
         first = ctx.integration(f, "first_pass_s") if f.has("first_pass_s") else 60.0
         budget = f.seconds("budget_s", 3600.0)
         overhead = f.number("overhead_s", None, low=0.0) if f.has("overhead_s") else None
-        if overhead is None and ctx.site is not None:
-            overhead = 6 * ctx.site.devices.spectrometer.period_s
+        period = ctx.site.devices.spectrometer.period_s if ctx.site is not None else 0.0
         step = CalibrateAdaptive(
             where,
             sources=tuple(dict.fromkeys(sources)),
@@ -149,7 +150,7 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
             band_hz=_band(f, ctx),
             antenna_k=f.number("antenna_k", 298.0, low=0.0, open_low=True),
         )
-        cost = 3 * first + step.overhead(0.0)
+        cost = 3 * first + step.overhead(period)
         if not f.failed and cost * len(step.sources) > budget:
             f.report(
                 "budget_s",

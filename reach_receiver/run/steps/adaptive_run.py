@@ -19,7 +19,12 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from calibration.design.adaptive import AdaptivePlanner, AdaptiveSettings, Decision
+from calibration.design.adaptive import (
+    POSITIONS,
+    AdaptivePlanner,
+    AdaptiveSettings,
+    Decision,
+)
 from calibration.model.data import CalibrationData
 from reach_receiver.store.handover import RECEIVER, interpolate_s11
 from reach_receiver.store.parts import as_str
@@ -143,11 +148,15 @@ def run_adaptive(step: CalibrateAdaptive, run: RunContext) -> None:
             elapsed += settings.cost_s(float(last["choice"]["seconds"]))
     offset = len(previous)
 
+    overheads: list[float] = []  # each cycle's clock time beyond its 3 t of integration
+
     def measure(source: str, seconds: float, label: str) -> None:
         nonlocal elapsed
         start = run.clock.now()
         dicke_cycle(run, source, seconds, label)
-        elapsed += run.clock.now() - start
+        took = run.clock.now() - start
+        elapsed += took
+        overheads.append(max(took - POSITIONS * seconds, 0.0))
 
     measured = {name for _, name, _ in _stored(run, "dicke")}
     todo = [s for s in step.sources if s not in measured]
@@ -157,12 +166,16 @@ def run_adaptive(step: CalibrateAdaptive, run: RunContext) -> None:
     planner = AdaptivePlanner(settings, _antenna_s11(run, step.antenna, data.freq_hz))
     while True:
         run.stop.check()
+        if step.overhead_s is None and overheads:  # the instrument's own, as measured
+            planner.settings = dataclasses.replace(
+                planner.settings, overhead_s=float(np.median(overheads))
+            )
         k = offset + len(planner.decisions)
         left = max(step.budget_s - elapsed, 0.0)
         run.progress.update(f"adaptive {k}: choosing", int(elapsed), int(step.budget_s), left)
         decision = planner.decide(data, elapsed)
         record = {**decision.as_record(), "step": k, "where": where, "target_mk": step.target_mk,
-                  "budget_s": step.budget_s}
+                  "budget_s": step.budget_s, "overhead_s": planner.settings.overhead_s}
         run.store.add_check(DECISION_CHECK, True, timestamp=run.clock.now(), details=record)
         log.info("%s", decision_line(k, decision, step.target_mk))
         if decision.choice is None:
