@@ -360,3 +360,17 @@ def test_a_short_night_gets_the_majority_rule_only_and_bad_input_is_refused():
         flag_night(x, own[:, :10], f)
     with pytest.raises(InvalidDataError, match="time, channel"):
         flag_night(x[0], None, f)
+
+
+@pytest.mark.parametrize("row", [0, 1, 22, 23])
+def test_a_burst_at_a_nights_ends_is_not_passed_to_a_clean_neighbour(row):
+    """The first and last two spectra are not judged by their level (no neighbours on
+    one side), and a burst there once flagged the spectrum two in, whose cubic leans on
+    it with weight 1/6."""
+    from calibration.checks.rfi_night import flag_night
+
+    rng = np.random.default_rng(500 + row)
+    f, x, sigma = night_of(rng)
+    x[row] *= 1 + 5 * sigma
+    night = flag_night(x, own_flags(f, x), f)
+    assert set(np.flatnonzero(night.spectra)) <= {row}

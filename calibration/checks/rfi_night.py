@@ -30,7 +30,9 @@
   spectra counts (a burst's neighbours see it at -2/3 and +1/6 of its size); the first
   and last two spectra, with no neighbours on one side, are not judged this way (the
   quadratic through the next three, extrapolated, missed the sky's change by 4e-4 in
-  the tests and flagged a clean spectrum). From
+  the tests and flagged a clean spectrum); a spectrum is flagged only where its
+  neighbours dip by a third of its excess at least (a burst at the ends raised the
+  spectrum two in by 1/6 of it, with no dip beside it). From
   :data:`MIN_LEVEL_SPECTRA` spectra on. The model leaves out flagged channels and as
   many again on each side of each flagged run (a hump's unflagged wings).
 
@@ -155,7 +157,12 @@ def _level_outliers(level: FloatArray, threshold: float) -> BoolArray:
     excess = _excess(level[known])
     filled = np.nan_to_num(excess, nan=-np.inf)
     peak = filled >= maximum_filter1d(filled, size=5, mode="nearest")
-    out[known] = peak & (filled > threshold * scale)
+    # a burst's neighbours see it at -2/3 of its size; a spectrum two in from a burst at
+    # the ends (not judged) sees it at +1/6 with no such dip beside it
+    before = np.concatenate([[np.nan], excess[:-1]])
+    after = np.concatenate([excess[1:], [np.nan]])
+    dips = [np.where(np.isnan(side), -np.inf, side) < -excess / 3 for side in (before, after)]
+    out[known] = peak & dips[0] & dips[1] & (np.nan_to_num(excess, nan=0.0) > threshold * scale)
     return out
 
 
