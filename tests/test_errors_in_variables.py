@@ -219,7 +219,7 @@ def beyond_run(seed: int):
     return simulate_run(config, rng=np.random.default_rng(seed))
 
 
-@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("seed", range(0, 8, 2))  # every other seed: 0 and 6 are the hard ones
 def test_a_truth_beyond_the_identified_box_is_found(seed):
     """Searched in the cut box alone, this truth was out of reach: in eight seeds of eight
     the antenna came out 33-56 times the noise floor off, 4.5-8 times its error bars.
@@ -236,7 +236,9 @@ def test_a_truth_beyond_the_identified_box_is_found(seed):
     by 0.6 in seed 0): the reflections' errors take the information that told them apart.
     Solved alone over the eight seeds, (1, 6, 4, 5, 3) and (1, 6, 5, 5, 3) are 1-10x the
     floor with error bars right on average (actual / predicted RMS 0.92, 1.04; (1, 7, 4,
-    5, 3) 1.54), so the width is mostly the choice's real uncertainty."""
+    5, 3) 1.54), so the width is mostly the choice's real uncertainty. The statements are
+    over the eight seeds 0-7; the suite runs the even four (its time), the odd ones held
+    the same bounds when last run (``range(8)``)."""
     run = beyond_run(seed)
     data = run.data
     floor = noise_floor(data, run.validation_noiseless, run.truth.parameters).rms

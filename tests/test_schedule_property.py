@@ -20,8 +20,8 @@ from reach_receiver.schedule.compile import ScheduleError
 
 START = datetime(2026, 11, 22, 12, 0, tzinfo=timezone.utc)
 SOURCES = sorted(REACH_SOURCES)
-PROFILE = settings(
-    max_examples=250,
+PROFILE = settings(  # derandomized: the same examples every run; more in a dedicated session
+    max_examples=120,
     deadline=None,
     derandomize=True,
     database=None,
@@ -103,7 +103,7 @@ def test_any_document_compiles_or_raises_schedule_error(document, flow):
     _outcome(yaml.safe_dump(document, default_flow_style=flow, allow_unicode=True))
 
 
-@settings(max_examples=150, deadline=None, derandomize=True, database=None)
+@settings(max_examples=80, deadline=None, derandomize=True, database=None)
 @given(
     text=st.text(
         alphabet=st.sampled_from(list("abc:{}[]-, \n\t'\"&*!|>%@`#$?0123\x00\x08\u2028")),

@@ -50,14 +50,14 @@ def _read_with_error(run, rng, correlation_hz):
 def test_the_spread_predicts_the_error_of_readings_off_by_the_data_sheet(
     calibrators, correlation_hz
 ):
-    """Pooled over 8 truths: error / predicted has unit spread and 68 % of it inside 1.
+    """Pooled over 6 truths: error / predicted has unit spread and 68 % of it inside 1.
 
-    Tolerances: the channels are correlated over the correlation length, so 8 runs hold
-    about 8 x 16 independent values at 5 MHz (fewer at 20 MHz): the spread of z is known
-    to about 10 %, and 24 draws estimate each predicted std to 15 %.
+    Tolerances: the channels are correlated over the correlation length, so 6 runs hold
+    about 6 x 16 independent values at 5 MHz (fewer at 20 MHz): the spread of z is known
+    to about 12 %, and 24 draws estimate each predicted std to 15 %.
     """
     z, ratio = [], []
-    for seed in range(8):
+    for seed in range(6):
         run = simulate_run(_config(calibrators), rng=seed)
         data, antenna = _read_with_error(run, np.random.default_rng(100 + seed), correlation_hz)
         orders = OrderChoice.fixed(run.truth.parameters.orders)
