@@ -45,7 +45,7 @@ def schedule(sources, target_mk, budget_s=20000, extra=""):
         f"      target_mk: {target_mk}\n"
         f"      budget_s: {budget_s}\n"
         "      first_pass_s: 30\n"
-        "      durations_s: [30, 60, 120]\n"
+        "      durations_s: [60, 120, 240]\n"
         f"{extra}"
         "  - calibrate: {}\n"
         "  - safe: {}\n"
@@ -186,4 +186,9 @@ def test_the_daemon_runs_an_adaptive_calibration_to_its_target(tmp_path):
     assert done.state == "completed"
     run_file = Path(done.run) / "run.h5"
     check_decisions(decisions(run_file), sources, target)
+    # The report draws the predicted error against time and sums the decisions up.
+    assert (Path(done.run) / "report" / "adaptive.png").stat().st_size > 10_000
+    summary = (Path(done.run) / "report" / "summary.md").read_text()
+    assert "adaptive calibration" in summary
+    assert "run check: adaptive_decision" not in summary
     assert actual_error_mk(run_file) < 2.5 * target

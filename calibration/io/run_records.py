@@ -6,7 +6,9 @@ also holds, all optional here (a file without them gives empty records)::
 
     /observation_metadata/temperature_log/{timestamps (s), values (degC)}, attr channels
     /calibration/calibrated/{name}/{frequencies (Hz), flags}   channel flags of a spectrum
-    /checks/NNN_<name>          attrs passed, details (JSON)
+    /checks/NNN_<name>          attrs passed, details (JSON); ``adaptive_decision`` checks
+                                hold the adaptive calibration step's decisions
+                                (:func:`adaptive_decisions`)
     /events/{timestamps, kinds, messages}
     /measurements/*_monitoring_*/{timestamps, series, values, status}, attrs keys, units,
                                 status_names: the health readings taken during the run
@@ -32,10 +34,22 @@ from .hdf5_io import PathLike
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-__all__ = ["Check", "RunRecords", "TemperatureLog", "file_software", "read_run_records"]
+__all__ = [
+    "ADAPTIVE_DECISION",
+    "Check",
+    "RunRecords",
+    "TemperatureLog",
+    "adaptive_decisions",
+    "file_software",
+    "read_run_records",
+]
 
 #: Health statuses that are not an alarm.
 QUIET_STATUSES = ("nominal", "unknown")
+#: The name of the checks that hold an adaptive calibration's decisions (one each: the
+#: :meth:`calibration.design.adaptive.Decision.as_record` of it, with ``step``, ``target_mk``,
+#: ``budget_s``, ``overhead_s`` and ``where``, the schedule line of its step).
+ADAPTIVE_DECISION = "adaptive_decision"
 #: Event kinds that only mark a schedule's progress.
 PROGRESS_EVENTS = ("step",)
 
@@ -169,3 +183,9 @@ def read_run_records(path: PathLike) -> RunRecords:
             status=_text(f.attrs.get("status", "")),
             reason=_text(f.attrs.get("reason", "")),
         )
+
+
+def adaptive_decisions(records: RunRecords) -> list[Mapping[str, Any]]:
+    """The adaptive calibration's decisions of a run, in their order (empty without one)."""
+    found = [c.details for c in records.checks if c.name == ADAPTIVE_DECISION]
+    return sorted(found, key=lambda d: int(d.get("step", 0)))

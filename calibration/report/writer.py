@@ -7,7 +7,7 @@ into a directory:
 * one PNG per figure of :mod:`calibration.report.figures` (and with ``pdf=True`` all of them in
   ``report.pdf``): the noise-wave parameters with their bands, the evidence over orders,
   and with a run the calibrated sources, reflections, Dicke powers, flagged channels and
-  thermocouples;
+  thermocouples, and for an adaptive calibration its predicted error against time;
 * ``summary.md`` and ``summary.html``: the model used (the average's heaviest model,
   its weight and size, :mod:`calibration.report.model_used`; the evidence-best single model and
   the leading averaged models with their weights beside it), every warning of the
@@ -58,7 +58,13 @@ from ..io.hdf5_io import (
     run_power_spectra,
     software_version,
 )
-from ..io.run_records import RunRecords, file_software, read_run_records
+from ..io.run_records import (
+    ADAPTIVE_DECISION,
+    RunRecords,
+    adaptive_decisions,
+    file_software,
+    read_run_records,
+)
 from ..io.solution_file import read_solution, read_solution_group
 from ..model.data import CalibrationData, SourceData
 from ..model.noise_waves import PARAMETERS, design_terms, source_temperature
@@ -239,7 +245,15 @@ def _check_rows(inputs: ReportInputs) -> list[tuple[str, ...]]:
     status = records.status + (f" ({records.reason})" if records.reason else "")
     rows.append(("run status", status or "not recorded"))
     for check in records.checks:
-        rows.append((f"run check: {check.name}", "passed" if check.passed else "FAILED"))
+        if check.name != ADAPTIVE_DECISION:  # drawn in adaptive.png, summed up below
+            rows.append((f"run check: {check.name}", "passed" if check.passed else "FAILED"))
+    decisions = adaptive_decisions(records)
+    if decisions:
+        last = decisions[-1]
+        rows.append(("adaptive calibration", (
+            f"{len(decisions)} decisions, {float(last['predicted_mk']):.3g} mK predicted after "
+            f"{float(last['elapsed_s']) / 3600:.2f} h (stop: {last.get('stop_reason')})"
+        )))
     alarms = [f"{key}: {worst} ({n} readings)" for key, (worst, n) in records.alarms.items()]
     rows.append(("alarms during the run", "; ".join(alarms) or "none"))
     events = [f"{kind}: {message}" for _, kind, message in records.events]
@@ -379,6 +393,9 @@ def figure_builders(
     )
     if loo is not None:
         builders["leave_one_out"] = lambda: loo_figure(loo, calibrated)
+    decisions = adaptive_decisions(inputs.records)
+    if decisions:
+        builders["adaptive"] = lambda: figures.adaptive_course(decisions)
     return builders
 
 

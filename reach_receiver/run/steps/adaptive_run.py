@@ -25,6 +25,7 @@ from calibration.design.adaptive import (
     AdaptiveSettings,
     Decision,
 )
+from calibration.io.run_records import ADAPTIVE_DECISION
 from calibration.model.data import CalibrationData
 from reach_receiver.store.handover import RECEIVER, interpolate_s11
 from reach_receiver.store.parts import as_str
@@ -38,7 +39,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 #: The name of the checks that hold the step's decisions in the run file.
-DECISION_CHECK = "adaptive_decision"
+DECISION_CHECK = ADAPTIVE_DECISION
 
 
 def decision_line(step: int, decision: Decision, target_mk: float | None) -> str:
