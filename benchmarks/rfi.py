@@ -47,7 +47,7 @@ same spectra; without either, the xrfi columns are left out::
 
     python -m benchmarks.rfi [--spectra 10] [--seed 0] [--xrfi-python /tmp/venv-ea/bin/python]
 
-The measured table is in ``benchmarks/README.md`` and docs/method.md.
+The measured table is in ``benchmarks/README.md``; its summary in docs/astronomers-guide.md.
 """
 
 from __future__ import annotations

@@ -1,5 +1,9 @@
 """RFI excision: flags for narrow spikes and short broadband bursts, kept beside the data.
 
+Broad humps of one spectrum are :mod:`calibration.checks.rfi_broad`'s (through
+:func:`flag_sky`), and a night's calibrated spectra flagged together
+:mod:`calibration.checks.rfi_night`'s.
+
 Nothing here changes or drops data: every function returns boolean flags of the data's
 shape (``True`` = flagged), to be stored next to the spectra and honoured by whatever
 averages or fits them (thesis 4.7 excised a spike at 78 MHz and four bands by hand; 5.1
