@@ -14,21 +14,27 @@ nothing to show yet:
   (:meth:`~reach_receiver.monitor.database.MetricsDatabase.series`) over the last day,
   drawn by :func:`calibration.report.figures.temperatures`;
 * :func:`current_solution`: the newest run's latest ``/calibration/solution`` drawn by
-  :func:`calibration.report.figures.noise_wave_parameters`.
+  :func:`calibration.report.figures.noise_wave_parameters`;
+* :func:`adaptive_progress`: the newest run with an adaptive calibration (running or
+  done), its antenna's predicted error falling against instrument time
+  (:func:`calibration.report.figures.adaptive_course`); on the page only once there is one
+  (:func:`adaptive_decisions`).
 """
 
 from __future__ import annotations
 
+import json
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from calibration.io.run_records import ADAPTIVE_DECISION
 from calibration.model.noise_waves import q_from_powers
-from calibration.report.figures import noise_wave_parameters
+from calibration.report.figures import adaptive_course, noise_wave_parameters
 from calibration.report.figures.reflections import SMITH_SPACE, smith_grid
 from calibration.report.figures.style import (
     NEUTRAL,
@@ -55,6 +61,8 @@ from .status_panels import DASHES, OKABE_ITO, temperature_panels
 __all__ = [
     "CAPTIONS",
     "FIGURES",
+    "adaptive_decisions",
+    "adaptive_progress",
     "current_solution",
     "data_version",
     "dicke_spectra",
@@ -231,6 +239,27 @@ def current_solution(runs: Path) -> Figure:
     return fig
 
 
+def adaptive_decisions(runs: Path) -> tuple[str, list[Mapping[str, Any]]] | None:
+    """The newest run with adaptive decisions (a running run's parts count): name, decisions."""
+    for contents in runs_newest_first(runs):
+        found = [m for m in contents.of_kind("check") if m.name == ADAPTIVE_DECISION]
+        if found:
+            details = [m.attrs.get("details", {}) for m in found]
+            decisions = [json.loads(d) if isinstance(d, str | bytes) else d for d in details]
+            return contents.name, sorted(decisions, key=lambda d: int(d.get("step", 0)))
+    return None
+
+
+def adaptive_progress(runs: Path) -> Figure:
+    """The newest adaptive calibration's predicted error against instrument time."""
+    newest = adaptive_decisions(runs)
+    if newest is None:
+        return styled(_empty)("no adaptive calibration yet")
+    fig = adaptive_course(newest[1])
+    suptitle(fig, f"run {newest[0]}")
+    return fig
+
+
 #: The page's figures by name, each built from the runs directory, the database, the
 #: daemon's clock and the site's alarm rules.
 FIGURES: dict[str, Callable[[Path, MetricsDatabase | None, float, Sequence[AlarmRule]],
@@ -239,6 +268,11 @@ FIGURES: dict[str, Callable[[Path, MetricsDatabase | None, float, Sequence[Alarm
     "s11": lambda runs, db, now, rules: s11s(runs),
     "temperatures": lambda runs, db, now, rules: temperatures_last_day(db, now, rules),
     "solution": lambda runs, db, now, rules: current_solution(runs),
+    "adaptive": lambda runs, db, now, rules: adaptive_progress(runs),
+}
+#: Figures on the page only when :data:`SHOWN_WHEN` says they have something to show.
+SHOWN_WHEN: dict[str, Callable[[Path], bool]] = {
+    "adaptive": lambda runs: adaptive_decisions(runs) is not None,
 }
 
 
@@ -248,6 +282,7 @@ CAPTIONS = {
     "s11": "the latest S11s",
     "temperatures": "the temperatures of the last day",
     "solution": "the current solution's noise-wave parameters",
+    "adaptive": "the adaptive calibration's predicted antenna error against time",
 }
 
 

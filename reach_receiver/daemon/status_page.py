@@ -307,6 +307,7 @@ class StatusPage:
         self._builders = status_figures.FIGURES
         self.figures = FigureCache(self._render, self._version, tuple(self._builders))
         self._spectrum: tuple[str, float | None] = ("", None)
+        self._shown: dict[str, tuple[str, bool]] = {}
         self._server: ThreadingHTTPServer | None = None
         self._thread: threading.Thread | None = None
 
@@ -326,11 +327,22 @@ class StatusPage:
             self._spectrum = (version, self._figures.last_spectrum(self.runs))
         return self._spectrum[1]
 
+    def shown(self, name: str) -> bool:
+        """Whether figure ``name`` is on the page (some only once they have data)."""
+        when = self._figures.SHOWN_WHEN.get(name)
+        if when is None:
+            return True
+        version = self._version(name)
+        if self._shown.get(name, ("", False))[0] != version:
+            self._shown[name] = (version, when(self.runs))
+        return self._shown[name][1]
+
     def html(self) -> str:
         """The page as it is now."""
         captions = self._figures.CAPTIONS
+        names = [n for n in self.figures.names if self.shown(n)]
         return render_page(
-            self.status(), [(n, captions.get(n, n)) for n in self.figures.names], time.time(),
+            self.status(), [(n, captions.get(n, n)) for n in names], time.time(),
             jobs=self.jobs(), last_spectrum=self.last_spectrum(), clock_now=self.now(),
         )
 

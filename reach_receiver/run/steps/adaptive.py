@@ -12,7 +12,9 @@ calibrated antenna it removes per second of instrument time,
 ``gain_i(t) = (V - V'_i(t)) / (3 t + overhead_s)`` with ``V = tr(C A)`` over ``band_hz``
 (docs/adaptive.md; thesis eqs. 3.27, 3.36, 3.41), measures the best with a Dicke cycle,
 and stops when the predicted error ``sqrt(V)`` reaches ``target_mk`` or no candidate fits
-in what is left of ``budget_s``.
+in what is left of ``budget_s``. ``target_fraction`` instead sets the target relative to
+the error predicted after the first pass (as ``python -m benchmarks.adaptive`` does): 0.5
+stops once the antenna's predicted error has halved.
 
 The instrument time is the run clock's across each Dicke cycle (switching and settling
 included); the engine's own computing is not charged (a compressed simulated clock would
@@ -61,6 +63,7 @@ class CalibrateAdaptive(Step):
     sources: tuple[str, ...]
     antenna: str = "ant"
     target_mk: float | None = None
+    target_fraction: float | None = None
     budget_s: float = 3600.0
     first_pass_s: float = 60.0
     durations_s: tuple[float, ...] = DEFAULT_DURATIONS_S
@@ -120,8 +123,8 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
     name = "calibrate_adaptive"
     step_type = CalibrateAdaptive
     keys = (
-        "sources", "antenna", "target_mk", "budget_s", "first_pass_s", "durations_s",
-        "overhead_s", "refresh_every", "band_hz", "antenna_k",
+        "sources", "antenna", "target_mk", "target_fraction", "budget_s", "first_pass_s",
+        "durations_s", "overhead_s", "refresh_every", "band_hz", "antenna_k",
     )
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> CalibrateAdaptive:
@@ -133,6 +136,9 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
         if len(set(sources)) < 2 and not f.failed:
             f.report("sources", "needs at least two different calibrators")
         target = f.number("target_mk", None, low=0.0, open_low=True) if f.has("target_mk") else None
+        fraction = f.fraction("target_fraction", 0.5) if f.has("target_fraction") else None
+        if target is not None and fraction is not None:
+            f.report("target_fraction", "give target_mk or target_fraction, not both")
         first = ctx.integration(f, "first_pass_s") if f.has("first_pass_s") else 60.0
         budget = f.seconds("budget_s", 3600.0)
         overhead = f.number("overhead_s", None, low=0.0) if f.has("overhead_s") else None
@@ -142,6 +148,7 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
             sources=tuple(dict.fromkeys(sources)),
             antenna=antenna,
             target_mk=target,
+            target_fraction=fraction,
             budget_s=budget,
             first_pass_s=first,
             durations_s=_durations(f, ctx),
@@ -162,6 +169,8 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
     def describe(self, step: CalibrateAdaptive) -> str:
         """Sources, target and budget."""
         target = f"to {step.target_mk:g} mK" if step.target_mk is not None else "no target"
+        if step.target_fraction is not None:
+            target = f"to {step.target_fraction:g} of the first pass's error"
         return (
             f"adaptive calibration of {len(step.sources)} calibrators for {step.antenna}, "
             f"{target}, budget {hms(step.budget_s)}"

@@ -165,6 +165,12 @@ def run_adaptive(step: CalibrateAdaptive, run: RunContext) -> None:
         measure(source, step.first_pass_s, f"first pass {index + 1}/{len(todo)}")
     data = _data(run, step)
     planner = AdaptivePlanner(settings, _antenna_s11(run, step.antenna, data.freq_hz))
+    target = step.target_mk
+    if step.target_fraction is not None:  # relative to the first pass (or to a resumed start)
+        target = previous[0][1].get("target_mk") if previous else None
+        if target is None:
+            target = step.target_fraction * planner.predict_mk(data)
+        planner.settings = dataclasses.replace(planner.settings, target_mk=target)
     while True:
         run.stop.check()
         if step.overhead_s is None and overheads:  # the instrument's own, as measured
@@ -175,10 +181,10 @@ def run_adaptive(step: CalibrateAdaptive, run: RunContext) -> None:
         left = max(step.budget_s - elapsed, 0.0)
         run.progress.update(f"adaptive {k}: choosing", int(elapsed), int(step.budget_s), left)
         decision = planner.decide(data, elapsed)
-        record = {**decision.as_record(), "step": k, "where": where, "target_mk": step.target_mk,
+        record = {**decision.as_record(), "step": k, "where": where, "target_mk": target,
                   "budget_s": step.budget_s, "overhead_s": planner.settings.overhead_s}
         run.store.add_check(DECISION_CHECK, True, timestamp=run.clock.now(), details=record)
-        log.info("%s", decision_line(k, decision, step.target_mk))
+        log.info("%s", decision_line(k, decision, target))
         if decision.choice is None:
             return
         c = decision.choice
