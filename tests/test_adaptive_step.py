@@ -17,11 +17,14 @@ import time
 import urllib.request
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
+from calibration.io.hdf5_io import read_run, write_run
 from calibration.io.run_records import read_run_records
 from calibration.model.noise_waves import design_terms, model_q, source_temperature
+from calibration.model.simulate import SimulationConfig, simulate_run
 from calibration.solve.radiometric_solver import solve_radiometric
 from reach_receiver.cli import run_main
 from reach_receiver.clock import ManualClock
@@ -216,3 +219,36 @@ def test_the_daemon_runs_an_adaptive_calibration_to_its_target(tmp_path):
     assert "adaptive calibration" in summary
     assert "run check: adaptive_decision" not in summary
     assert actual_error_mk(run_file) < 2.5 * target
+
+
+@pytest.mark.parametrize(("t1", "t2"), [(30.0, 120.0), (300.0, 60.0), (60.0, 60.0)])
+def test_cycles_of_unequal_length_are_averaged_by_integration_time(tmp_path, t1, t2):
+    # The hand-over's layout: one row per Dicke cycle, each row's time beside it when they
+    # differ. A plain mean of a 30 s and a 120 s cycle would have 1.6x the variance the
+    # summed 150 s implies (eq. 3.9); the reader weights by time instead.
+    config = SimulationConfig(f_hi_hz=52e6, calibrators=("cold", "hot", "r100"))
+    run = simulate_run(config, rng=1)
+    path = tmp_path / "run.h5"
+    write_run(path, run.data)
+    rng = np.random.default_rng(int(t1 + t2))
+    rows = {}
+    with h5py.File(path, "r+") as f:
+        obs = f["observation_data"]
+        for suffix in ("spectra", "load_spectra", "ns_spectra"):
+            one = obs[f"hot_{suffix}"][()]
+            rows[suffix] = np.stack([one * (1 + 0.01 * rng.standard_normal(one.size)), one])
+            del obs[f"hot_{suffix}"]
+            obs[f"hot_{suffix}"] = rows[suffix]
+        spectra = obs["hot_spectra"]
+        for position in ("source", "load", "ns"):
+            spectra.attrs[f"integration_s_{position}"] = (t1 + t2) / 2
+            if t1 != t2:
+                spectra.attrs[f"row_integration_s_{position}"] = [t1, t2]
+    data, _ = read_run(path)
+    hot = data.sources["hot"]
+    for attr, suffix in (("p_source", "spectra"), ("p_load", "load_spectra"),
+                         ("p_ns", "ns_spectra")):
+        expected = (t1 * rows[suffix][0] + t2 * rows[suffix][1]) / (t1 + t2)
+        np.testing.assert_allclose(getattr(hot, attr), expected, rtol=1e-12)
+    assert hot.integration.source_s == pytest.approx(t1 + t2)
+    assert hot.integration.ns_s == pytest.approx(t1 + t2)
