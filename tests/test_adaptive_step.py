@@ -30,7 +30,10 @@ from reach_receiver.cli import run_main
 from reach_receiver.clock import ManualClock
 from reach_receiver.config.daemon import DaemonSettings
 from reach_receiver.daemon.service import Daemon, Directories
+from reach_receiver.run.resume import StepLog, remaining
+from reach_receiver.run.steps import STANDARD_KINDS, CalibrateAdaptive
 from reach_receiver.run.steps.adaptive_run import DECISION_CHECK
+from reach_receiver.schedule.compile import compile_text
 from reach_receiver.sim.physics import ReceiverPhysics
 from reach_receiver.sim.receiver import SimulatedReceiver, SimulationSettings, spectrum_period_for
 from reach_receiver.store import read_run_file
@@ -252,3 +255,17 @@ def test_cycles_of_unequal_length_are_averaged_by_integration_time(tmp_path, t1,
         np.testing.assert_allclose(getattr(hot, attr), expected, rtol=1e-12)
     assert hot.integration.source_s == pytest.approx(t1 + t2)
     assert hot.integration.ns_s == pytest.approx(t1 + t2)
+
+
+def test_an_interrupted_adaptive_step_resumes_and_a_finished_one_does_not_run_again():
+    text = schedule(["cold", "hot", "r100"], "target_mk: 5")
+    compiled = compile_text(text, "adaptive.yaml", kinds=STANDARD_KINDS)
+    index = next(i for i, s in enumerate(compiled.steps) if isinstance(s, CalibrateAdaptive))
+    assert not compiled.steps[index].resumed
+    started = StepLog(started={(index,)}, measured={(index,): [("dicke", "cold")]})
+    rest = remaining(compiled.steps, STANDARD_KINDS, started)
+    (resumed,) = [s for s in rest if isinstance(s, CalibrateAdaptive)]
+    assert resumed.resumed  # carries on from the decisions stored (adaptive_run)
+    finished = StepLog(started={(index,)}, done={(index,)})
+    assert not [s for s in remaining(compiled.steps, STANDARD_KINDS, finished)
+                if isinstance(s, CalibrateAdaptive)]

@@ -35,6 +35,7 @@ measured again in the first pass, and the instrument time goes on from the last 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -71,6 +72,8 @@ class CalibrateAdaptive(Step):
     refresh_every: int = 4
     band_hz: tuple[float, float] | None = None
     antenna_k: float = 298.0
+    #: Set by :meth:`CalibrateAdaptiveKind.rest`: carry on from the decisions stored.
+    resumed: bool = False
 
     def overhead(self, period_s: float) -> float:
         """Switching and settling per cycle (s): the step's, else six spectrum periods."""
@@ -187,11 +190,8 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
     def rest(
         self, step: CalibrateAdaptive, measured: Sequence[tuple[str, str]]
     ) -> CalibrateAdaptive | None:
-        """The step again: it reads what is stored (cycles, decisions) and carries on.
-
-        Done only once its stopping decision is stored.
-        """
-        return step
+        """The step, resumed: it reads what is stored (cycles, decisions) and carries on."""
+        return dataclasses.replace(step, resumed=True)
 
     def execute(self, step: CalibrateAdaptive, run: RunContext) -> None:
         """First pass, then the planner's choices until the target or the budget."""

@@ -63,13 +63,20 @@ def _stored(run: RunContext, kind: str) -> list[tuple[int, str, dict[str, Any]]]
 
 
 def _previous_decisions(run: RunContext, where: str) -> list[tuple[int, dict[str, Any]]]:
-    found = []
+    """The stored decisions of the interrupted run of the step at ``where`` (carried copies).
+
+    Those of an earlier run of it that stopped (a ``repeat``'s repetitions) are left out.
+    """
+    found: list[tuple[int, dict[str, Any]]] = []
     for number, name, attrs in _stored(run, "check"):
         if name != DECISION_CHECK:
             continue
         details = json.loads(as_str(attrs.get("details", "{}")))
-        if details.get("where") == where:
-            found.append((number, details))
+        if details.get("where") != where:
+            continue
+        if found and found[-1][1].get("choice") is None:
+            found = []
+        found.append((number, details))
     return found
 
 
@@ -137,7 +144,7 @@ def run_adaptive(step: CalibrateAdaptive, run: RunContext) -> None:
     _check_reflections(run, step)
     where = str(step.where)
     settings = settings_of(step, run.period_s)
-    previous = _previous_decisions(run, where)
+    previous = _previous_decisions(run, where) if step.resumed else []
     elapsed = 0.0
     if previous:  # resumed: the instrument time goes on from the last decision
         number, last = previous[-1]
