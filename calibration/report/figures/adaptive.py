@@ -3,8 +3,8 @@
 Each decision of the adaptive step (:mod:`calibration.design.adaptive`) states the antenna's
 predicted calibration error ``sqrt(V)``, ``V = tr(C A)`` over the band of interest
 (docs/adaptive.md; thesis eqs. 3.36, 3.41), after the instrument time spent so far; the
-figure draws it on a logarithmic scale with the target and the budget, and names the
-calibrator each decision chose (coloured by calibrator).
+figure draws it (on a logarithmic scale where it falls more than threefold) with the
+target and the budget, and names the calibrator each decision chose (by colour).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.ticker import ScalarFormatter
+from matplotlib.ticker import FormatStrFormatter, LogLocator
 
 from .style import NEUTRAL, Space, grid, legend_right, new_figure, note, source_styles, styled
 
@@ -54,9 +54,11 @@ def adaptive_course(decisions: Sequence[Mapping[str, Any]]) -> Figure:
     if budget_h <= 1.3 * hours[-1]:  # else it would squeeze the decisions to one side
         ax.axvline(budget_h, color="C3", ls="--", lw=1.0, label=f"budget {budget_h:.3g} h")
     ax.set_xlim(0.0, None)
-    ax.set_yscale("log")
-    ax.yaxis.set_major_formatter(ScalarFormatter())
-    ax.yaxis.set_minor_formatter(ScalarFormatter())
+    if mk.max() > 3 * mk.min():  # a logarithmic axis only where it spans a factor
+        ax.set_yscale("log")
+        ax.yaxis.set_minor_locator(LogLocator(subs=np.arange(1.0, 10.0)))
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
     ax.set_xlabel("instrument time (h, switching included)")
     ax.set_ylabel("antenna's predicted error (mK)")
     reason = stop.get("stop_reason") or "running"
