@@ -56,7 +56,7 @@ def adaptive_course(decisions: Sequence[Mapping[str, Any]]) -> Figure:
     ax.set_xlim(0.0, None)
     if mk.max() > 3 * mk.min():  # a logarithmic axis only where it spans a factor
         ax.set_yscale("log")
-        ax.yaxis.set_minor_locator(LogLocator(subs=np.arange(1.0, 10.0)))
+        ax.yaxis.set_minor_locator(LogLocator(subs="all"))
         ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
         ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
     ax.set_xlabel("instrument time (h, switching included)")
