@@ -62,7 +62,7 @@ def test_help_and_version_import_nothing_heavy(main, argv):
 #: (with the kit file's format, text that import's --help prints).
 CAL_PARSER = ("calibration.core.errors", "calibration.cli", "calibration.cli.main",
               "calibration.cli.args", "calibration.cli.import_parser",
-              "calibration.cli.season_parser", "calibration.rf",
+              "calibration.cli.season_parser", "calibration.cli.design_parser", "calibration.rf",
               "calibration.rf.kit_format")
 
 
@@ -70,7 +70,7 @@ CAL_PARSER = ("calibration.core.errors", "calibration.cli", "calibration.cli.mai
     ["--help"], ["--version"], [], ["solve", "--help"], ["simulate", "--help"],
     ["validate", "--help"], ["report", "--help"], ["import", "edges", "--help"],
     ["import", "vna", "--help"], ["solve", "run.h5"], ["season", "--help"],
-    ["export", "--help"], ["season", "run.h5"],
+    ["export", "--help"], ["season", "run.h5"], ["plan", "--help"],
 ])
 def test_reach_cal_parses_before_it_imports_the_engine(argv):
     code = PROBE.format(module="calibration.cli", main="main", argv=argv, heavy=HEAVY,
