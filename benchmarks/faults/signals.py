@@ -12,6 +12,7 @@ the simulator starts, during the run) and judges how it ended:
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -47,23 +48,47 @@ def _command(program: str, *args: str) -> list[str]:
 
 
 def _signalled(argv: list[str], cwd: Path, at_s: float, signum: int) -> tuple[int | None, str]:
+    """The exit code and output; ``None`` and the threads' stacks where it did not end.
+
+    The child runs with Python's fault handler on, so that a hung one, sent SIGABRT,
+    prints where each of its threads was (the detail a hang in CI needs).
+    """
+    env = {**os.environ, "PYTHONFAULTHANDLER": "1"}
     process = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               stdin=subprocess.DEVNULL, text=True)
+                               stdin=subprocess.DEVNULL, text=True, env=env)
     time.sleep(at_s)
     if process.poll() is None:
         process.send_signal(signum)
     try:
         out, err = process.communicate(timeout=HANG_S)
     except subprocess.TimeoutExpired:
-        process.kill()
-        out, err = process.communicate()
+        process.send_signal(signal.SIGABRT)
+        try:
+            out, err = process.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            out, err = process.communicate()
         return None, err
     return process.returncode, out + err
 
 
+def _stuck_at(dump: str) -> str:
+    """Each thread of a fault-handler dump: its innermost frame and its innermost of ours."""
+    threads: list[str] = []
+    for block in dump.split("\n\n"):
+        lines = [line.strip().replace("File ", "") for line in block.splitlines()]
+        if not lines or not lines[0].startswith(("Thread 0x", "Current thread 0x")):
+            continue
+        frames = lines[1:]
+        ours = [f for f in frames if _reached_our_code(f)]
+        threads.append(" < ".join(dict.fromkeys(frames[:1] + ours[:1])))
+    return "; ".join(reversed(threads))[:800] or dump.strip()[-300:]
+
+
 def _judge(name: str, code: int | None, text: str, runs: Path) -> Trial:
     if code is None:
-        return Trial(name, "crash", f"no end within {HANG_S:g} s after the signal")
+        return Trial(name, "crash",
+                     f"no end within {HANG_S:g} s after the signal; threads at: {_stuck_at(text)}")
     if "Traceback (most recent call last)" in text or "internal error" in text:
         last = [line for line in text.strip().splitlines() if line.strip()][-1:]
         where = "" if _reached_our_code(text) else " (in Python's own start-up, before main)"
