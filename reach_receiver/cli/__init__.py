@@ -41,9 +41,28 @@ def _main(program: str, module: str, function: str, argv: Sequence[str] | None) 
         return 1
 
 
+#: Stop signals that reached ``reachd`` before it had its daemon's handlers: kept, not
+#: raised. A SIGINT raised as KeyboardInterrupt while it imports can land in a finalizer
+#: or a library's own ``except BaseException``, where Python drops it, and the daemon then
+#: started and served as if never told to stop (a fault-suite trial, under load).
+#: :mod:`.reachd` reads them at each step of its start and stops at the first it sees.
+EARLY_STOPS: list[int] = []
+_STOPS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _keep_stop(signum: int, frame: object) -> None:
+    del frame
+    EARLY_STOPS.append(signum)
+
+
 def reachd_main(argv: Sequence[str] | None = None) -> int:
-    """``reachd`` (:mod:`.reachd`)."""
-    return _main("reachd", ".reachd", "reachd_main", argv)
+    """``reachd`` (:mod:`.reachd`), its stop signals kept from the first moment."""
+    previous = {s: signal.signal(s, _keep_stop) for s in _STOPS}
+    try:
+        return _main("reachd", ".reachd", "reachd_main", argv)
+    finally:  # in-process callers (tests) get their own handlers back
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def run_main(argv: Sequence[str] | None = None) -> int:

@@ -43,6 +43,21 @@ log = logging.getLogger("reach_receiver.daemon")
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)
 
 
+def _stopped_while_starting() -> int | None:
+    """The exit status (128 + signal) if a stop signal came before the daemon's handlers.
+
+    :data:`reach_receiver.cli.EARLY_STOPS` keeps them; each step of the start looks here,
+    so that a signal is answered at the next step instead of lost.
+    """
+    from . import EARLY_STOPS
+
+    if not EARLY_STOPS:
+        return None
+    signum = EARLY_STOPS[0]
+    print(f"reachd: stopped by {signal.Signals(signum).name} while starting", file=sys.stderr)
+    return 128 + signum
+
+
 def parser() -> argparse.ArgumentParser:
     """The command line of ``reachd``."""
     p = argparse.ArgumentParser(
@@ -70,6 +85,8 @@ def reachd_main(argv: Sequence[str] | None = None) -> int:
     """``reachd``: exit 0 after a clean stop, 1 when it cannot start, 2 for bad input."""
     args = parser().parse_args(argv)
     configure_logging(args.verbose)
+    if (stopped := _stopped_while_starting()) is not None:
+        return stopped
     problem = _site_out_problem(args.site_out) if args.sim else None
     if problem:
         print(f"reachd: --site-out {args.site_out}: {problem}", file=sys.stderr)
@@ -149,6 +166,8 @@ def _serve_sim(base: SiteConfig | None, args: argparse.Namespace) -> int:
         seed=args.seed,
     )
     with SimulatedReceiver(settings) as sim:
+        if (stopped := _stopped_while_starting()) is not None:
+            return stopped
         site = _with_sim(base, sim.site(), args)
         if args.site_out is not None:
             _write(args.site_out, site.to_yaml())
@@ -176,6 +195,9 @@ def _serve(
         print(f"reachd: cannot start: {err}", file=sys.stderr)
         return 1
     made_safe = _safe_first(site)
+    if (stopped := _stopped_while_starting()) is not None:
+        lock.release()
+        return stopped
 
     from reach_receiver.daemon.service import Daemon, Directories
 
@@ -188,6 +210,10 @@ def _serve(
 
     for handled in STOP_SIGNALS:
         signal.signal(handled, on_signal)
+    from . import EARLY_STOPS
+
+    if EARLY_STOPS:  # after the last look, before these handlers: the loop stops at once
+        daemon.halt(f"signal {signal.Signals(EARLY_STOPS[0]).name} while starting")
     try:
         daemon.start(made_safe)
     except (ReceiverError, OSError) as err:
