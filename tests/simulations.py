@@ -56,3 +56,19 @@ def thesis_style_run(
         for name, src in run.data.sources.items()
     }
     return replace(run.data, sources=sources), run.truth
+
+
+def with_exact_reflections(data: CalibrationData, physics) -> CalibrationData:
+    """``data`` with the reflections the simulated receiver's VNA would read without error.
+
+    ``physics`` is the simulated receiver's (:class:`reach_receiver.sim.physics.ReceiverPhysics`):
+    the receiver's own reflection and each source's at the VNA's reference plane.
+    """
+    freq = data.freq_hz
+    at_vna = physics.config.effects.at_vna
+    return replace(
+        data,
+        gamma_rec=physics.reflection("lna", freq),
+        sources={name: replace(source, gamma=at_vna(physics.reflection(name, freq), freq))
+                 for name, source in data.sources.items()},
+    )

@@ -20,6 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from simulations import with_exact_reflections
 
 from calibration.io.hdf5_io import read_run, write_run
 from calibration.io.run_records import read_run_records
@@ -73,16 +74,7 @@ def actual_error_mk(run_file):
     data, _ = contents.calibration_data()
     freq = data.freq_hz
     physics = ReceiverPhysics(ManualClock())
-    exact = dataclasses.replace(
-        data,
-        gamma_rec=physics.reflection("lna", freq),
-        sources={
-            name: dataclasses.replace(
-                source, gamma=physics.config.effects.at_vna(physics.reflection(name, freq), freq)
-            )
-            for name, source in data.sources.items()
-        },
-    )
+    exact = with_exact_reflections(data, physics)
     solution = solve_radiometric(exact)
     gamma_ant = physics.config.effects.at_vna(physics.reflection("ant", freq), freq)
     terms = design_terms(gamma_ant, exact.gamma_rec)

@@ -1,6 +1,5 @@
 """``reach-run`` end to end against the simulated receiver: the main job, bad input, faults."""
 
-import dataclasses
 import itertools
 import os
 import re
@@ -12,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from simulations import with_exact_reflections
 
 from calibration.solve.radiometric_solver import solve_radiometric
 from reach_receiver.cli import run_main
@@ -62,16 +62,7 @@ def test_main_job_recovers_the_simulators_noise_waves(tmp_path, capsys):
     truth = physics.effective_theta(freq)
     # The same spectra with the reflections the simulated VNA would have read without
     # error: the posterior holds the radiometer noise, as in test_receiver_loop.
-    exact = dataclasses.replace(
-        data,
-        gamma_rec=physics.reflection("lna", freq),
-        sources={
-            name: dataclasses.replace(
-                source, gamma=physics.config.effects.at_vna(physics.reflection(name, freq), freq)
-            )
-            for name, source in data.sources.items()
-        },
-    )
+    exact = with_exact_reflections(data, physics)
     exact_solution = solve_radiometric(exact)
     z = (exact_solution.evaluate(freq) - truth) / exact_solution.parameter_std(freq)
     assert np.all(np.sqrt(np.mean(z**2, axis=1)) < 2.5)
