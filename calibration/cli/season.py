@@ -1,17 +1,23 @@
-"""``reach-cal season``: many runs' calibrated spectra in LST bins (:mod:`calibration.season`)."""
+"""``reach-cal season``: many runs' calibrated spectra in LST bins (:mod:`calibration.season`).
+
+The season is computed on Dask (:mod:`calibration.season.archive`); :func:`cluster`
+opens the cluster ``season`` and ``recalibrate`` share.
+"""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from ..core.errors import InvalidDataError
-from ..io.calibrated_spectra import read_calibrated_spectra
-from ..season.binning import bin_run, combine, lst_edges
+from ..season.archive import Cluster, archive_client, season_on_dask
+from ..season.binning import lst_edges
 from ..season.season_file import SEASON_FORMAT, write_season
 from .files import same_file
 
@@ -52,12 +58,33 @@ def check_output(path: str, inputs: list[str], kind: str, fmt: str | None) -> No
         )
 
 
+#: Runs per local worker when --workers is not given (a worker process takes seconds to start).
+RUNS_PER_WORKER = 4
+
+
+def missing_runs(runs: list[str]) -> None:
+    """Refuse a run file that is not there, before any cluster starts."""
+    for path in runs:
+        if not os.path.isfile(path):
+            raise InvalidDataError(f"{path}: no such run file")
+
+
+@contextlib.contextmanager
+def cluster(args: argparse.Namespace, n_runs: int) -> Iterator[Cluster]:
+    """The Dask cluster of ``--scheduler``, or a local one of ``--workers``."""
+    workers = args.workers or min(os.cpu_count() or 1, -(-n_runs // RUNS_PER_WORKER))
+    with archive_client(args.scheduler, workers, args.memory_per_worker) as opened:
+        yield opened
+
+
 def cmd_season(args: argparse.Namespace) -> int:
-    """Read, bin and combine the runs; write the season file."""
+    """Read, bin and combine the runs on Dask; write the season file."""
     runs = run_files(list(args.runs))
     check_output(args.output, runs, "season", SEASON_FORMAT)
     edges = lst_edges(args.lst_bin_h)
-    season = combine(bin_run(read_calibrated_spectra(path), edges) for path in runs)
+    missing_runs(runs)
+    with cluster(args, len(runs)) as opened:
+        season = season_on_dask(opened, runs, edges)
     write_season(Path(args.output), season, software=_software())
     used = ~season.flags
     print(

@@ -1,0 +1,152 @@
+"""A run file's calibrated spectra read in chunks of rows, each binned on its own.
+
+A large run (a night of 1 s spectra is tens of thousands of rows of 16k channels, GBs)
+does not fit one worker's memory as one :class:`~calibration.io.calibrated_spectra.RunSpectra`.
+:func:`read_rows` reads rows ``[start, stop)`` of the run's calibrated spectra, exactly
+the rows :func:`~calibration.io.calibrated_spectra.read_calibrated_spectra` would give
+(the same solutions, times, LSTs, and the night's flags ORed into the rows they name: a
+night check names each spectrum's latest row of its name before the check, over the
+whole run); :func:`bin_rows` bins them (:func:`calibration.season.binning.bin_run`), and the
+chunks' sums add (:func:`calibration.season.binning.add`) to the run's.
+
+:func:`rows_per_chunk` sizes a chunk to a memory budget: a row costs about
+:data:`ROW_ARRAYS` float64 arrays of its channels at once (the five read, their stacked
+copies, the binning's weights and products).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from typing import Any
+
+import h5py
+import numpy as np
+
+from ..core.errors import FileFormatError, InvalidDataError
+from ..core.sidereal import apparent_lst_h
+from ..io.calibrated_spectra import (
+    RunSpectra,
+    SolutionRecord,
+    _site,
+    _spectrum,
+    _text,
+    solution_digest,
+)
+from ..io.hdf5_io import RECEIVER_RUN_FORMAT
+from .binning import BinnedRun, FloatArray, bin_run
+
+__all__ = ["ROW_ARRAYS", "bin_rows", "count_rows", "read_rows", "rows_per_chunk"]
+
+#: float64 arrays of a row's channels held at once while a chunk is read and binned
+#: (measured: ``python -m benchmarks.archive`` prints the peak per worker against it).
+ROW_ARRAYS = 24
+
+
+def rows_per_chunk(n_channels: int, budget_bytes: float) -> int:
+    """Rows of ``n_channels`` whose reading and binning fit ``budget_bytes`` (at least 1)."""
+    return max(1, int(budget_bytes // (ROW_ARRAYS * 8 * max(n_channels, 1))))
+
+
+def _open(path: str) -> h5py.File:
+    if not os.path.isfile(path):
+        raise InvalidDataError(f"{path}: no such run file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise FileFormatError(f"{path}: not an HDF5 run file ({err})") from err
+    fmt = _text(f.attrs.get("format", ""))
+    if fmt != RECEIVER_RUN_FORMAT or "measurements" not in f:
+        f.close()
+        raise FileFormatError(
+            f"{path}: not a receiver's run file (format {fmt!r}); a season reads the "
+            "run.h5 files reach-run writes"
+        )
+    return f
+
+
+def _no_rows(path: str) -> InvalidDataError:
+    return InvalidDataError(
+        f"{path}: no calibrated spectra (observe calibrates its cycles once the run has "
+        "a solution); leave this run out of the season"
+    )
+
+
+def count_rows(path: str) -> tuple[int, int]:
+    """The run's number of calibrated spectra and their channels (attributes only)."""
+    with _open(path) as f:
+        groups = [g for g in f["measurements"].values()
+                  if _text(g.attrs["kind"]) == "calibrated"]
+        if not groups:
+            raise _no_rows(path)
+        return len(groups), int(groups[0]["frequencies"].shape[0])
+
+
+def read_rows(path: str, start: int, stop: int) -> RunSpectra:
+    """Rows ``[start, stop)`` of the run's calibrated spectra (module doc)."""
+    with _open(path) as f:
+        groups = sorted(f["measurements"].values(), key=lambda g: int(g.attrs["sequence"]))
+        by_number = {int(g.attrs["sequence"]): g for g in groups}
+        solutions: list[SolutionRecord] = []
+        rows: dict[int, dict[str, Any]] = {}
+        latest: dict[str, int] = {}  # a name's latest row so far, over the whole run
+        index = 0
+        for g in groups:
+            kind = _text(g.attrs["kind"])
+            if kind == "solution" and "solution" in g:
+                solutions.append(SolutionRecord(
+                    solution_digest(g["solution"]), path, g.name.rsplit("/", 1)[-1],
+                    float(g.attrs["timestamp"]), _text(g["solution"].attrs.get("method", "")),
+                ))
+            elif kind == "calibrated":
+                latest[_text(g.attrs["name"])] = index
+                if start <= index < stop:
+                    rows[index] = _spectrum(g, by_number, path, len(solutions) - 1)
+                index += 1
+            elif kind == "check" and _text(g.attrs["name"]).startswith("rfi_night_"):
+                _night_flags(g, rows, latest)
+        if not index:
+            raise _no_rows(path)
+        if not rows:
+            raise InvalidDataError(f"{path}: rows {start}-{stop} of {index} asked for")
+        site = _site(f, path)
+        run_name = _text(f.attrs.get("name", os.path.basename(os.path.dirname(path))))
+    ordered = [rows[i] for i in sorted(rows)]
+    freq = ordered[0]["freq"]
+    for row in ordered[1:]:
+        if row["freq"].shape != freq.shape or not np.allclose(row["freq"], freq, rtol=1e-9):
+            raise InvalidDataError(f"{path}: calibrated spectra on different frequency grids")
+    times = np.array([r["time"] for r in ordered])
+
+    def stack(key: str) -> FloatArray:
+        return np.asarray(np.stack([r[key] for r in ordered]), dtype=float)
+
+    return RunSpectra(
+        path=path, run_name=run_name, site=site, freq_hz=freq,
+        names=tuple(r["name"] for r in ordered), mean=stack("mean"),
+        std_radiometer=stack("std_radiometer"), std_calibration=stack("std_calibration"),
+        std_reflection=stack("std_reflection"), flags=np.stack([r["flags"] for r in ordered]),
+        time_s=times, integration_s=np.array([r["integration"] for r in ordered]),
+        lst_h=apparent_lst_h(times, site.longitude_deg),
+        solution=np.array([r["solution"] for r in ordered], dtype=np.int64),
+        solutions=tuple(solutions), sweeps=tuple(r["sweeps"] for r in ordered),
+    )
+
+
+def _night_flags(g: h5py.Group, rows: dict[int, dict[str, Any]], latest: dict[str, int]) -> None:
+    """OR a night's flags into the rows of this chunk it names (each name's latest row)."""
+    names = json.loads(_text(g.attrs.get("details", "{}"))).get("spectra", [])
+    if "flags" not in g or not names:
+        return
+    flags = np.asarray(g["flags"][()], dtype=bool)
+    for name, row_flags in zip(names, flags, strict=False):
+        row = rows.get(latest.get(name, -1))
+        if row is not None and row["flags"].shape == row_flags.shape:
+            row["flags"] = row["flags"] | row_flags
+
+
+def bin_rows(path: str, start: int, stop: int, edges_h: FloatArray) -> BinnedRun:
+    """Rows ``[start, stop)`` of a run binned; the run is named by its first chunk only."""
+    binned = bin_run(read_rows(path, start, stop), edges_h)
+    return binned if start == 0 else dataclasses.replace(binned, runs=())
