@@ -1,0 +1,188 @@
+"""A short simulated week: ``reachd --sim`` on its timers, ``reach-cal season`` over its runs.
+
+The suite's version of ``python -m benchmarks.season_week`` (its module doc has the
+statistics): ``reachd --sim`` at its 3000x clock with the timers of the benchmark's site
+(four 6-h slots a sidereal day, all of them observing here, so that whichever fires
+first after the daemon serves is an observing run), stopped once two observing runs
+completed, each with its own calibration and a few calibrated antenna cycles on 5 MHz of
+band. The plan (calibrators, Dicke and antenna integrations, cycles) is drawn from a
+seeded family. The tolerances follow from how many independent numbers each statistic
+holds: a channel's radiometer noise is independent of every other's, a solution's error
+is a combination of its few polynomial coefficients (``COEFFICIENTS_A_SOLUTION``).
+
+The season must also read the observe step's night flags (``rfi_night_<source>``): a run
+file written through the receiver's store, as the observe step writes it, whose night
+flags mark channels that the cycles' own flags do not.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.season_week import Sums, WeekPlan, add_run, add_season, run_week, season_of
+from calibration.cli import main
+from calibration.io.calibrated_spectra import read_calibrated_spectra
+from calibration.model.reflections import reach_source_reflection
+from calibration.season.binning import Season
+from calibration.season.season_file import read_season
+from reach_receiver.store import RunStore
+from reach_receiver.store.handover import HandOver
+from tests.test_season import SITE_YAML, Night, cycles, make_night, night_times, sky_k
+
+#: Independent numbers a solution's error over 5 MHz holds at least: the noise waves'
+#: polynomial coefficients (orders 1-5 each of five terms) seen through the antenna.
+COEFFICIENTS_A_SOLUTION = 8
+#: Standard deviations of a statistic that a test allows.
+SIGMAS = 4.0
+#: The family the short week's plan is drawn from (the benchmark runs seeds over it).
+#: The open and shorted cables in every set: without a reflective calibrator the noise
+#: waves' cos and sin terms are not identified (the solver refuses such a run).
+CALIBRATOR_SETS = (("cold", "hot", "c10open", "c10short"),
+                   ("cold", "hot", "c10open", "c10short", "r100"),
+                   ("cold", "hot", "c10open", "c10short", "c2r36"))
+
+
+def _plan() -> WeekPlan:
+    rng = np.random.default_rng(39)
+    return WeekPlan(
+        days=3.0, compression=3000.0, seed=int(rng.integers(1000)), observing=4,
+        cycles=2, position_s=float(rng.choice([100.0, 200.0, 400.0])),
+        dicke_s=float(rng.choice([60.0, 120.0])), band_mhz=(60.0, 65.0),
+        calibrators=CALIBRATOR_SETS[int(rng.integers(len(CALIBRATOR_SETS)))],
+        observing_runs=2, start_real_s=5.0,
+    )
+
+
+@pytest.fixture(scope="module")
+def week(tmp_path_factory):
+    where = tmp_path_factory.mktemp("week")
+    plan = _plan()
+    done = run_week(where, plan)
+    assert len(done.observing_runs) >= 2, (done.jobs, (where / "reachd.log").read_text()[-3000:])
+    season = season_of(done.observing_runs, where / "season.h5", 1.0)
+    runs = [read_calibrated_spectra(p / "run.h5") for p in done.observing_runs]
+    return done, season, runs
+
+
+def test_the_timers_ran_the_observing_runs_each_with_its_own_solution(week):
+    done, season, runs = week
+    assert all(re.fullmatch(r"timer observe-[0-3] \((on time|late)\)",
+                            j["origin"]) for j in done.jobs), done.jobs
+    assert len(season.solutions) == len(done.observing_runs)
+    assert sum(r.mean.shape[0] for r in runs) == len(season.spectra)
+    assert season.freq_hz[0] >= 60e6
+    assert season.freq_hz[-1] <= 65e6
+
+
+def test_the_season_minus_the_true_sky_over_its_stated_error_has_rms_one(week):
+    _, season, _runs = week
+    sums = Sums()
+    add_season(sums, season)
+    used = ~season.flags
+    share_r = float(np.mean(season.std_radiometer[used] ** 2 / season.std[used] ** 2))
+    # var(mean z^2) = 2 (share_r^2 / independent channels + share_c^2 / coefficients)
+    independent = sums.z_n
+    coefficients = COEFFICIENTS_A_SOLUTION * len(season.solutions)
+    sd = math.sqrt(2 * (share_r**2 / independent + (1 - share_r) ** 2 / coefficients))
+    assert abs(sums.rms**2 - 1.0) < SIGMAS * sd, (sums.rms, sd, share_r)
+
+
+def test_each_error_part_against_the_scatter_of_its_own_source(week):
+    _, _season, runs = week
+    sums = Sums()
+    for run in runs:
+        add_run(sums, run)
+    # the cycles' scatter: one independent chi^2 term per channel and degree of freedom
+    assert abs(sums.ratio_r - 1.0) < SIGMAS * math.sqrt(2.0 / sums.dof), sums.ratio_r
+    # the runs' residuals: a solution's error holds few independent numbers
+    sd_c = math.sqrt(2.0 / (COEFFICIENTS_A_SOLUTION * sums.runs))
+    assert abs(sums.ratio_c - 1.0) < SIGMAS * sd_c + 0.5, sums.ratio_c
+
+
+# ------------------------------------------------------------------ the night's flags
+def _night_run(directory: Path, night: Night, n: int, night_flags: np.ndarray,
+               store_flags: bool = True) -> Path:
+    """A run file as the observe step writes it: solution, cycles, each calibrated, and
+    (``store_flags``) the night's flags, ``rfi_night_ant`` over the cycles' names."""
+    freq = night.sim.data.freq_hz
+    rng = np.random.default_rng(n)
+    spectra = cycles(night, rng, n, float(rng.choice([60.0, 600.0])), sky_k(freq))
+    # what the night flags mark is interference: far off
+    spectra = [dataclasses.replace(s, mean=np.where(f, 1e6, s.mean))
+               for s, f in zip(spectra, night_flags, strict=True)]
+    times = night_times(0, n, step_s=600.0)  # every cycle in LST bin 2
+    store = RunStore(directory, name="night", schedule_files=[], site_yaml=SITE_YAML,
+                     metadata={}, channel_width_hz=night.sim.data.channel_width_hz,
+                     band_hz=(freq[0], freq[-1]))
+    names = [f"ant_{i:04d}" for i in range(n)]
+    positions = ("source", "load", "ns")
+    with store:
+        s11 = {"ant": store.add_s11("ant", freq, reach_source_reflection("ant", freq),
+                                    timestamp=times[0], settings={}, calibrated=True),
+               "lna": store.add_s11("lna", freq, night.sim.data.gamma_rec,
+                                    timestamp=times[0], settings={}, calibrated=True)}
+        store.add_solution(night.solution, timestamp=times[0] - 60, verification={})
+        for name, spectrum, t in zip(names, spectra, times, strict=True):
+            number = store.add_dicke(
+                "ant", spectra={p: np.ones((1, freq.size)) for p in positions},
+                timestamps={p: [t - 5, t + 5] for p in positions},
+                integration_s=dict.fromkeys(positions, 300.0),
+                n_spectra=dict.fromkeys(positions, 2), temperature_k=None,
+                switch_states={}, counters={}, timestamp=t + 600,
+            )
+            handover = HandOver((freq[0], freq[-1]), night.sim.data.channel_width_hz,
+                                {"ant": (number,)}, s11, ())
+            store.add_calibrated(
+                name, freq, spectrum.mean, spectrum.std, np.zeros(freq.size, bool),
+                timestamp=t + 600, handover=handover,
+                errors={"std_calibration": spectrum.std_calibration,
+                        "std_radiometer": spectrum.std_measurement},
+            )
+        if store_flags:
+            store.add_check("rfi_night_ant", True, timestamp=times[-1] + 700,
+                            details={"spectra": names, "threshold_sigma": 5.0},
+                            arrays={"flags": night_flags})
+    return directory / "run.h5"
+
+
+def _season(run: Path, out: Path) -> Season:
+    assert main(["season", str(run.parent), "-o", str(out)]) == 0
+    return read_season(out)
+
+
+@pytest.mark.parametrize(("seed", "n"), [(11, 4), (12, 6)])
+def test_the_night_flags_of_the_observe_step_give_no_weight(tmp_path, seed, n):
+    rng = np.random.default_rng(seed)
+    night = make_night(seed)
+    n_ch = night.sim.data.freq_hz.size
+    everywhere = int(rng.integers(n_ch))  # bad all night: the bin's channel has no data
+    once = rng.choice(np.delete(np.arange(n_ch), everywhere), size=5, replace=False)
+    which = int(rng.integers(n))
+    flags = np.zeros((n, n_ch), dtype=bool)
+    flags[:, everywhere] = True
+    flags[which, once] = True
+    path = _night_run(tmp_path / "night", night, n, flags)
+    season = _season(path, tmp_path / "season.h5")
+    assert season.flags[2, everywhere]
+    assert np.isnan(season.mean[2, everywhere])
+    assert np.array_equal(season.count[2, once], [n - 1] * 5)
+    clean = np.delete(np.arange(n_ch), everywhere)
+    assert np.all(np.abs(season.mean[2, clean] - sky_k(season.freq_hz)[clean])
+                  < 6 * season.std[2, clean])
+
+
+def test_without_the_night_flags_those_channels_would_count(tmp_path):
+    """The control: the same far-off values, no ``rfi_night_ant``: the season takes them."""
+    night = make_night(11)
+    flags = np.zeros((4, night.sim.data.freq_hz.size), dtype=bool)
+    flags[:, 7] = True
+    path = _night_run(tmp_path / "night", night, 4, flags, store_flags=False)
+    season = _season(path, tmp_path / "season.h5")
+    assert not season.flags[2, 7]
+    assert season.mean[2, 7] > 1e5
