@@ -16,6 +16,8 @@
     reach-cal validate RUN.h5 --leave-one-out [...]
     reach-cal report SOLUTION.h5 [--run RUN.h5] -o DIR [--pdf] [--no-leave-one-out]
     reach-cal season RUNS... -o SEASON.h5 [--lst-bin-h H]   (cli.season_parser)
+                     [--workers N | --scheduler ADDRESS] [--memory-per-worker SIZE]
+    reach-cal recalibrate SOLUTION.h5 RUNS... -o DIR [--workers N | --scheduler ADDRESS]
     reach-cal export --format gsdata SEASON.h5 -o OUT.gsh5
     reach-cal plan RUN.h5 --target-mk X [--antenna ant] [--antenna-k K]  (cli.design_parser)
 
@@ -29,7 +31,7 @@ on stderr without a traceback and exit with status 2, as do usage errors; succes
 Parsing imports nothing of the engine (:mod:`calibration.cli.args`): ``--help`` and
 ``--version`` answer at once, and a command's module (:mod:`.simulate`, :mod:`.solve`,
 :mod:`.apply`, :mod:`.summary`, :mod:`.validate`, :mod:`.report`, :mod:`.import_commands`,
-:mod:`.season`, :mod:`.export`, :mod:`.design`)
+:mod:`.season`, :mod:`.recalibrate`, :mod:`.export`, :mod:`.design`)
 is imported when it runs.
 """
 
@@ -70,7 +72,10 @@ MAX_VNA_DRAWS = 10_000
 DESCRIPTIONS = {
     "simulate": "Write a simulated run with the validation source ``ant`` and the truth.",
     "solve": "Solve a run for the noise-wave parameters and write the solution.",
-    "apply": "Calibrate a source of a run with a solution.",
+    "apply": """Calibrate a source of a run with a solution.
+
+An archive of runs (each antenna cycle, as observe calibrated it) is recalibrated with a
+new solution by reach-cal recalibrate SOLUTION RUNS... -o DIR.""",
     "summary": "Print a solution's parameters and evidence, and its distance to the floor.",
     "validate": """Validate a run: each calibrator held out of the solve, calibrated as a source.
 

@@ -19,7 +19,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-from typing import Any
+from collections.abc import Iterator, Mapping
+from typing import Any, cast
 
 import h5py
 import numpy as np
@@ -74,38 +75,63 @@ def _no_rows(path: str) -> InvalidDataError:
 
 
 def count_rows(path: str) -> tuple[int, int]:
-    """The run's number of calibrated spectra and their channels (attributes only)."""
+    """The run's number of calibrated spectra and their channels (names and one shape)."""
     with _open(path) as f:
-        groups = [g for g in f["measurements"].values()
-                  if _text(g.attrs["kind"]) == "calibrated"]
-        if not groups:
+        by_number = _Measurements(f["measurements"])
+        numbers = [n for n in by_number if by_number.kind_and_name(n)[0] == "calibrated"]
+        if not numbers:
             raise _no_rows(path)
-        return len(groups), int(groups[0]["frequencies"].shape[0])
+        return len(numbers), int(by_number[numbers[0]]["frequencies"].shape[0])
+
+
+class _Measurements(Mapping[int, h5py.Group]):
+    """A run's measurements by number, each group opened only when asked for.
+
+    The names are ``NNNNNN_<kind>_<name>`` (``reach_receiver/store/merge.py``): the scan of
+    a chunk reads names, not the attributes of every group of the run.
+    """
+
+    def __init__(self, measurements: h5py.Group):
+        self.group = measurements
+        self.keys_by_number = {int(k.split("_", 1)[0]): k for k in measurements}
+
+    def __getitem__(self, number: int) -> h5py.Group:
+        return self.group[self.keys_by_number[number]]
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(sorted(self.keys_by_number))
+
+    def __len__(self) -> int:
+        return len(self.keys_by_number)
+
+    def kind_and_name(self, number: int) -> tuple[str, str]:
+        _, kind, name = self.keys_by_number[number].split("_", 2)
+        return kind, name
 
 
 def read_rows(path: str, start: int, stop: int) -> RunSpectra:
     """Rows ``[start, stop)`` of the run's calibrated spectra (module doc)."""
     with _open(path) as f:
-        groups = sorted(f["measurements"].values(), key=lambda g: int(g.attrs["sequence"]))
-        by_number = {int(g.attrs["sequence"]): g for g in groups}
+        by_number = _Measurements(f["measurements"])
         solutions: list[SolutionRecord] = []
         rows: dict[int, dict[str, Any]] = {}
         latest: dict[str, int] = {}  # a name's latest row so far, over the whole run
         index = 0
-        for g in groups:
-            kind = _text(g.attrs["kind"])
-            if kind == "solution" and "solution" in g:
+        for number in by_number:
+            kind, name = by_number.kind_and_name(number)
+            if kind == "solution" and "solution" in (g := by_number[number]):
                 solutions.append(SolutionRecord(
                     solution_digest(g["solution"]), path, g.name.rsplit("/", 1)[-1],
                     float(g.attrs["timestamp"]), _text(g["solution"].attrs.get("method", "")),
                 ))
             elif kind == "calibrated":
-                latest[_text(g.attrs["name"])] = index
+                latest[name] = index
                 if start <= index < stop:
-                    rows[index] = _spectrum(g, by_number, path, len(solutions) - 1)
+                    lookup = cast(dict[int, Any], by_number)  # _spectrum only looks up
+                    rows[index] = _spectrum(by_number[number], lookup, path, len(solutions) - 1)
                 index += 1
-            elif kind == "check" and _text(g.attrs["name"]).startswith("rfi_night_"):
-                _night_flags(g, rows, latest)
+            elif kind == "check" and name.startswith("rfi_night_"):
+                _night_flags(by_number[number], rows, latest)
         if not index:
             raise _no_rows(path)
         if not rows:
