@@ -124,10 +124,16 @@ def archive_client(
         return
     memory = memory_per_worker or default_memory(workers)
     processes = workers > 1
-    cluster = LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=processes,
-        memory_limit=memory, dashboard_address=":0", silence_logs=logging.ERROR,
-    )
+    try:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=processes,
+            memory_limit=memory, dashboard_address=":0", silence_logs=logging.ERROR,
+        )
+    except (RuntimeError, OSError) as err:
+        raise InvalidDataError(
+            f"a local Dask cluster of {workers} workers did not start ({err}); run with "
+            "--workers 1 (in this process) or --scheduler ADDRESS"
+        ) from None
     with cluster, Client(cluster) as client:
         kind = f"{workers} worker processes" if processes else "1 worker (a thread here)"
         yield Cluster(
