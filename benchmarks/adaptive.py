@@ -1,9 +1,9 @@
 """Adaptive calibration against the fixed round-robin: instrument time to a target error.
 
 Run ``python -m benchmarks.adaptive [--runs 20] [--seed 0] [--target-fraction 0.4]
-[--antenna-k 298]`` (24-38 s a run on a shared two-core machine, about 10 minutes for
-20 runs), or ``--coverage --runs 200 --target-fraction 0.6`` for the coverage of the
-adaptive runs' final intervals (7-11 s a run, 23-37 minutes).
+[--antenna-k 298] [--antenna-index 0]`` (24-38 s a run on a shared two-core machine,
+about 10 minutes for 20 runs), or ``--coverage --runs 200 --target-fraction 0.6`` for the
+coverage of the adaptive runs' final intervals (7-11 s a run, 23-37 minutes).
 
 Each run draws a truth (:mod:`benchmarks.model_choice`'s random truths: random orders 1-6
 and term sizes 0.3-30 posterior sd), REACH's twelve calibrators and the antenna's
@@ -50,8 +50,9 @@ ENSEMBLE = Ensemble("random truths, 12 cal", REACH_CALIBRATORS)
 FIRST_PASS_S = 60.0
 OVERHEAD_S = 10.0
 COVERAGE_CHANNELS = 8
-#: The antenna's temperature (K): the simulator's ambient ``ant`` by default (``--antenna-k``).
-ANTENNA_K = [298.0]
+#: The antenna's assumed temperature: the settings of the run (``--antenna-k`` at 75 MHz,
+#: ``--antenna-index``; by default the simulator's ambient ``ant``, 298 K and flat).
+ANTENNA = [AdaptiveSettings()]
 
 
 @dataclass
@@ -69,9 +70,8 @@ class Outcome:
 def finish(rx: SimulatedReceiver, elapsed: float, predicted: float, n: int) -> Outcome:
     """The default solve of what ``rx`` measured, against the truth."""
     data = rx.data()
-    antenna_k = ANTENNA_K[0]
-    cal = solve_radiometric(data).calibrate(data.freq_hz, data.gamma_rec, rx.antenna(antenna_k))
-    truth = np.full(data.freq_hz.size, antenna_k)
+    truth = ANTENNA[0].antenna_temperatures(data.freq_hz)
+    cal = solve_radiometric(data).calibrate(data.freq_hz, data.gamma_rec, rx.antenna(truth))
     channels = np.linspace(0, data.freq_hz.size - 1, COVERAGE_CHANNELS).astype(int)
     inside = [
         int(np.sum(cal.covers(truth, level, calibration_only=True)[channels]))
@@ -148,14 +148,21 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     p.add_argument("--target-fraction", type=float, default=0.4)
     p.add_argument("--target-mk", type=float, default=None, help="a fixed target instead")
     p.add_argument("--coverage", action="store_true", help="coverage of the final intervals")
-    p.add_argument("--antenna-k", type=float, default=298.0, help="antenna temperature, K")
+    p.add_argument(
+        "--antenna-k", type=float, default=298.0, help="antenna temperature at 75 MHz, K"
+    )
+    p.add_argument(
+        "--antenna-index", type=float, default=0.0,
+        help="its spectral index (0: a flat load; about -2.5: the sky)",
+    )
     args = p.parse_args(argv)
-    ANTENNA_K[0] = args.antenna_k
     fraction = None if args.target_mk is not None else args.target_fraction
     base = AdaptiveSettings(
         target_mk=args.target_mk, budget_s=400_000.0, first_pass_s=FIRST_PASS_S,
         overhead_s=OVERHEAD_S, antenna_temperature_k=args.antenna_k,
+        antenna_index=args.antenna_index,
     )
+    ANTENNA[0] = base
     sd = pilot_sd(ENSEMBLE)
     rng = np.random.default_rng(args.seed)
     rows: list[tuple[Outcome, Outcome]] = []
@@ -183,7 +190,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     wall = time.perf_counter() - start
     n = len(rows)
     print(
-        f"{n} runs, antenna at {args.antenna_k:g} K, {wall:.0f} s ({wall / max(n, 1):.1f} s a run)"
+        f"{n} runs, antenna at {args.antenna_k:g} K at 75 MHz, index {args.antenna_index:g}, "
+        f"{wall:.0f} s ({wall / max(n, 1):.1f} s a run)"
     )
     if args.coverage:
         total = COVERAGE_CHANNELS * n

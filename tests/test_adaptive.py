@@ -148,3 +148,31 @@ def test_a_band_of_interest_is_judged_on_its_channels_alone():
         assert info.variance() == pytest.approx(np.mean(cal.std_calibration[mask] ** 2), rel=1e-3)
     with pytest.raises(ValueError, match="holds none"):
         antenna_information(solution, data, rx.antenna_s11, band_hz=(200e6, 300e6))
+
+
+@pytest.mark.parametrize("seed", [9, 10])
+def test_a_sky_antenna_is_predicted_at_its_own_temperatures_and_leans_on_the_hot_load(seed):
+    """The sky (2500 K at 75 MHz, index -2.5) against a load at 298 K, on the same data.
+
+    Its predicted variance is that of its calibrated spectrum (as for any antenna), and
+    far larger: it lies some 3000-6000 K beyond calibrators within 100 K of ambient but
+    the hot load, whose share of the information is then most of it (0.71-0.85 over
+    seeds 9-12) where the 298 K load's was a few per cent (0.007-0.06).
+    """
+    rx = receiver(seed)
+    planner = AdaptivePlanner(AdaptiveSettings(), rx.antenna_s11)
+    first_pass(rx, planner)
+    data = rx.data()
+    solution = solve_radiometric(data)
+    sky = AdaptiveSettings(antenna_temperature_k=2500.0, antenna_index=-2.5)
+    temps = sky.antenna_temperatures(data.freq_hz)
+    assert temps[np.argmin(abs(data.freq_hz - 75e6))] == pytest.approx(2500.0, rel=0.01)
+    on_sky = antenna_information(solution, data, rx.antenna_s11, temps)
+    on_load = antenna_information(solution, data, rx.antenna_s11)
+    cal = solution.calibrate(data.freq_hz, data.gamma_rec, rx.antenna(temps))
+    assert on_sky.variance() == pytest.approx(np.mean(cal.std_calibration**2), rel=1e-3)
+    assert on_sky.variance() > 100 * on_load.variance()
+    hot = data.names.index("hot")
+    assert on_sky.shares()[hot] > 0.5 > 0.2 > on_load.shares()[hot]
+    with pytest.raises(ValueError, match="index finite"):
+        AdaptiveSettings(antenna_index=float("nan"))

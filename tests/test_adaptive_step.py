@@ -157,12 +157,13 @@ def test_a_bad_adaptive_step_is_refused_before_anything_moves(tmp_path, capsys):
         "      durations_s: [0, 60]\n"
         "      band_hz: [2.0e+8, 3.0e+8]\n"
         "      refresh_evry: 2\n"
+        "      antenna_index: -9\n"
     )
     out = tmp_path / "runs"
     assert run_main([str(bad), "--sim", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     for line, key in [(5, "antenna"), (6, "target_mk"), (7, "durations_s"), (8, "band_hz"),
-                      (9, "refresh_evry")]:
+                      (9, "refresh_evry"), (10, "antenna_index")]:
         assert any(f"{bad}:{line}" in row and key in row for row in err.splitlines()), err
     assert "Traceback" not in err
     assert not out.exists()  # no run started, no device contacted

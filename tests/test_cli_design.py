@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
 import pytest
 
+from calibration.cli.design import power_law
 from calibration.cli.main import main
 from calibration.core.constants import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
 
@@ -68,6 +70,7 @@ def test_plan_says_when_the_budget_is_too_small(run, capsys):
     (["plan", "{run}", "--target-mk", "-1"], "--target-mk"),
     (["solve", "{run}", "-o", "{out}", "--contributions", "--method", "thesis"],
      "--method radiometric"),
+    (["plan", "{run}", "--target-mk", "2", "--antenna-index", "-2.5"], "needs --antenna-k"),
 ])
 def test_bad_requests_end_in_one_line_with_the_way_out(run, tmp_path, capsys, argv, says):
     argv = [a.format(run=run, out=tmp_path / "s.h5") for a in argv]
@@ -76,3 +79,23 @@ def test_bad_requests_end_in_one_line_with_the_way_out(run, tmp_path, capsys, ar
     assert says in err
     assert "Traceback" not in err
     assert len([line for line in err.splitlines() if "error:" in line]) == 1
+
+
+@pytest.mark.parametrize(("t0", "index", "seed"), [(2500.0, -2.5, 0), (298.0, 0.0, 1),
+                                                   (4000.0, -2.8, 2)])
+def test_the_antenna_s_power_law_is_fitted_to_its_calibrated_spectrum(t0, index, seed):
+    """``T_0 (f/75 MHz)^beta`` back from a spectrum with 1 % noise per channel, 50-130 MHz."""
+    freq = np.linspace(50e6, 130e6, 400)
+    truth = t0 * (freq / 75e6) ** index
+    noisy = truth * (1 + 0.01 * np.random.default_rng(seed).normal(size=freq.size))
+    fitted_t0, fitted_index = power_law(freq, noisy, "ant")
+    assert fitted_t0 == pytest.approx(t0, rel=0.003)  # 1 % / sqrt(400) and the slope's share
+    assert fitted_index == pytest.approx(index, abs=0.01)
+
+
+def test_plan_with_a_sky_antenna_says_so_and_leans_on_the_hot_load(run, capsys):
+    argv = ["plan", str(run), "--target-mk", "50", "--antenna-k", "2500", "--antenna-index", "-2.5"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    rows = dict(re.findall(r"^  (\S+)\s+([\d.]+)$", out, re.M))
+    assert max(rows, key=lambda name: float(rows[name])) == "hot", out

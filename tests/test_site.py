@@ -9,6 +9,8 @@ from reach_receiver.errors import ConfigError
 from reach_receiver.frontend.layout import REACH_SOURCES, SourcePosition
 from reach_receiver.run import compile_text
 from reach_receiver.run.instruments import Instruments
+from reach_receiver.run.steps.adaptive import CalibrateAdaptive
+from reach_receiver.run.steps.adaptive_run import settings_of
 from reach_receiver.schedule.compile import ScheduleError
 
 
@@ -102,3 +104,32 @@ def test_thermocouple_ports_follow_table_2_2_unless_the_site_says_otherwise(tmp_
     assert load_site(path).thermocouples == site.thermocouples
     with pytest.raises(ConfigError, match=r"thermocouples\.hot: must be a TC-08 port 1-8"):
         parse_site({"devices": DEVICES, "thermocouples": {"hot": 9}})
+
+
+def test_a_band_of_interest_round_trips_and_reaches_the_adaptive_step(tmp_path):
+    site = parse_site({"devices": DEVICES, "calibration": {
+        "band_hz": [50e6, 130e6], "band_of_interest_hz": [60e6, 90e6]}})
+    assert site.band_of_interest_hz == (60e6, 90e6)
+    path = tmp_path / "site.yaml"
+    path.write_text(site.to_yaml())
+    assert load_site(path).band_of_interest_hz == (60e6, 90e6)
+    assert parse_site({"devices": DEVICES}).band_of_interest_hz is None
+    step = CalibrateAdaptive("s.yaml:2", sources=("cold", "hot"))
+    assert settings_of(step, 1.0, site.band_of_interest_hz).band_hz == (60e6, 90e6)
+    own = CalibrateAdaptive("s.yaml:2", sources=("cold", "hot"), band_hz=(70e6, 80e6))
+    assert settings_of(own, 1.0, site.band_of_interest_hz).band_hz == (70e6, 80e6)
+
+
+@pytest.mark.parametrize(
+    ("interest", "message"),
+    [
+        ([40e6, 90e6], "must lie inside the calibration band"),
+        ([90e6, 60e6], "with 0 <= low < high"),
+        ("60-90", "with 0 <= low < high"),
+    ],
+)
+def test_a_band_of_interest_outside_the_band_or_malformed_is_named(interest, message):
+    with pytest.raises(ConfigError) as err:
+        parse_site({"devices": DEVICES, "calibration": {"band_of_interest_hz": interest}})
+    assert "calibration.band_of_interest_hz" in str(err.value)
+    assert message in str(err.value)

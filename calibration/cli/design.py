@@ -12,7 +12,7 @@ import argparse
 import numpy as np
 
 from ..core.errors import InvalidDataError
-from ..design.adaptive import AdaptivePlanner, AdaptiveSettings
+from ..design.adaptive import ANTENNA_REF_HZ, AdaptivePlanner, AdaptiveSettings
 from ..design.contributions import contributions, plan
 from ..design.information import AntennaInformation, band_mask
 from ..io.hdf5_io import read_run
@@ -48,24 +48,47 @@ def information(
 ) -> tuple[AntennaInformation, AdaptivePlanner, AdaptiveSettings]:
     """The antenna's information from ``data`` (the planner's posterior: its model fixed).
 
-    The antenna's temperature is ``--antenna-k`` or its band mean as ``solution`` (the
-    default solve where none is given) calibrates it.
+    The antenna's temperature is ``--antenna-k`` at 75 MHz with ``--antenna-index``, or
+    the power law fitted to its spectrum as ``solution`` (the default solve where none is
+    given) calibrates it (:func:`power_law`).
     """
     antenna = _antenna(args, data)
-    antenna_k = args.antenna_k
+    antenna_k, index = args.antenna_k, args.antenna_index
+    if antenna_k is None and index != 0:
+        raise InvalidDataError("--antenna-index needs --antenna-k (the temperature at 75 MHz)")
     if antenna_k is None:
         solution = solution or solve_radiometric(data)
         spectrum = solution.calibrate(data.freq_hz, data.gamma_rec, antenna)
-        antenna_k = float(np.mean(spectrum.mean))
-        if not antenna_k > 0:
-            raise InvalidDataError(
-                f"{args.antenna} calibrates to {antenna_k:.4g} K: give its temperature "
-                "with --antenna-k"
-            )
-    settings = _settings(args, antenna_temperature_k=antenna_k, **extra)
+        antenna_k, index = power_law(data.freq_hz, spectrum.mean, args.antenna)
+    settings = _settings(args, antenna_temperature_k=antenna_k, antenna_index=index, **extra)
     planner = AdaptivePlanner(settings, antenna.gamma)
     info, _ = planner.information(data)
     return info, planner, settings
+
+
+def power_law(freq_hz: np.ndarray, temperature_k: np.ndarray, name: str) -> tuple[float, float]:
+    """``(T_0, beta)`` of ``T = T_0 (f / 75 MHz)^beta`` fitted to a calibrated spectrum.
+
+    Least squares in ``log T`` against ``log f``: the sky a global 21-cm antenna sees is
+    close to a power law (index about -2.5), a load on the antenna port a flat one; the
+    planner needs the antenna's temperature only through its design row, so this smooth
+    stand-in for a noisy spectrum serves it.
+    """
+    if not np.all(temperature_k > 0):
+        raise InvalidDataError(
+            f"{name} calibrates to {float(np.min(temperature_k)):.4g} K somewhere in the band: "
+            "give its temperature with --antenna-k (and --antenna-index)"
+        )
+    x = np.log(np.asarray(freq_hz, dtype=float) / ANTENNA_REF_HZ)
+    slope, intercept = np.polyfit(x, np.log(temperature_k), 1)
+    return float(np.exp(intercept)), float(slope)
+
+
+def _temperature(settings: AdaptiveSettings) -> str:
+    """The antenna's assumed temperature in words."""
+    if settings.antenna_index == 0:
+        return f"{settings.antenna_temperature_k:.4g} K"
+    return f"{settings.antenna_temperature_k:.4g} K at 75 MHz, index {settings.antenna_index:.2f}"
 
 
 def _where(data: CalibrationData, settings: AdaptiveSettings) -> str:
@@ -80,7 +103,7 @@ def contribution_lines(
     info, planner, settings = information(args, data, solution)
     now = 1e3 * planner.kappa * float(np.sqrt(info.variance()))
     lines = [
-        f"calibrators' contributions to {args.antenna} ({settings.antenna_temperature_k:.4g} K): "
+        f"calibrators' contributions to {args.antenna} ({_temperature(settings)}): "
         f"predicted calibration error {now:.4g} mK RMS over {_where(data, settings)}, "
         f"orders {','.join(map(str, info.orders))}",
         f"  {'calibrator':<12}{'s/position':>11}{'share':>8}{'without it (mK)':>17}",

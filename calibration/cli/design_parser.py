@@ -23,8 +23,13 @@ def add_antenna_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--antenna-k", type=positive_float, default=None,
-        help="the antenna's temperature, K (default: its band mean as the solution "
-        "calibrates it)",
+        help="the antenna's temperature at 75 MHz, K (default: a power law fitted to its "
+        "spectrum as the solution calibrates it)",
+    )
+    parser.add_argument(
+        "--antenna-index", type=float, default=0.0,
+        help="with --antenna-k: its spectral index (default 0, a flat load; about -2.5 for "
+        "the sky)",
     )
     parser.add_argument(
         "--interest", type=band_arg, default=None, metavar="LO,HI",

@@ -53,6 +53,7 @@ from ..solve.solution import Solution
 from .information import AntennaInformation, antenna_information
 
 ComplexArray = NDArray[np.complex128]
+FloatArray = NDArray[np.float64]
 
 #: The refits between refreshes: one model under the thesis's wide prior (no scale search;
 #: the refresh's ``kappa`` carries the averaged solution's own width).
@@ -60,6 +61,8 @@ FIXED_PRIOR = RadiometricPrior(coefficients=CoefficientPrior())
 
 #: Instrument time of one measurement of ``t`` s per Dicke position: source, load, noise source.
 POSITIONS = 3
+#: Where the antenna's assumed temperature is given (:meth:`AdaptiveSettings.antenna_temperatures`).
+ANTENNA_REF_HZ = 75e6
 
 
 @dataclass(frozen=True)
@@ -73,7 +76,8 @@ class AdaptiveSettings:
     overhead_s: float = 10.0  # switching + settling per measurement (charged to each candidate)
     refresh_every: int = 4  # re-run the model choice every N decisions
     band_hz: tuple[float, float] | None = None  # weighted band of interest (None: whole band)
-    antenna_temperature_k: float = 298.0  # the antenna's assumed temperature (its design row)
+    antenna_temperature_k: float = 298.0  # the antenna's assumed temperature at ANTENNA_REF_HZ
+    antenna_index: float = 0.0  # its spectral index: 0 an ambient load, about -2.5 the sky
 
     def __post_init__(self) -> None:
         if self.target_mk is not None and not self.target_mk > 0:
@@ -84,10 +88,28 @@ class AdaptiveSettings:
             raise ValueError("durations_s needs at least one duration, each > 0")
         if self.overhead_s < 0 or self.refresh_every < 1:
             raise ValueError("overhead_s must be >= 0 and refresh_every >= 1")
+        if not self.antenna_temperature_k > 0 or not np.isfinite(self.antenna_index):
+            raise ValueError("the antenna's temperature must be > 0 K and its index finite")
 
     def cost_s(self, seconds: float) -> float:
         """Instrument time of one measurement: ``3 t + overhead_s``."""
         return POSITIONS * seconds + self.overhead_s
+
+    def antenna_temperatures(self, freq_hz: FloatArray) -> FloatArray:
+        """The antenna's assumed temperature per channel: ``T_0 (f / f_0)^beta`` (K).
+
+        ``T_0 = antenna_temperature_k`` at ``f_0 =`` :data:`ANTENNA_REF_HZ`, ``beta =
+        antenna_index``. The sky a global 21-cm antenna sees falls as a power law of index
+        about -2.5 (some 2000-3000 K at 75 MHz away from the galactic plane); a load on
+        the antenna port is flat.
+        The predicted error of the calibrated antenna grows with its temperature (the
+        noise-source and gain terms scale with ``T_ant``), so where the time goes depends
+        on it.
+        """
+        freq = np.asarray(freq_hz, dtype=float)
+        return np.asarray(
+            self.antenna_temperature_k * (freq / ANTENNA_REF_HZ) ** self.antenna_index
+        )
 
 
 @dataclass(frozen=True)
@@ -199,7 +221,7 @@ class AdaptivePlanner:
     def _info(self, solution: Solution, data: CalibrationData) -> AntennaInformation:
         s = self.settings
         return antenna_information(
-            solution, data, self.antenna_s11, s.antenna_temperature_k, s.band_hz
+            solution, data, self.antenna_s11, s.antenna_temperatures(data.freq_hz), s.band_hz
         )
 
     def predict_mk(self, data: CalibrationData) -> float:

@@ -44,8 +44,11 @@ class SimulatedReceiver:
         """The antenna's reflection over the channels."""
         return np.asarray(self.run.validation_noiseless.gamma)
 
-    def antenna(self, temperature_k: float) -> SourceData:
-        """The antenna (the simulator's ``ant`` reflection) at ``temperature_k``, noiseless."""
+    def antenna(self, temperature_k: float | np.ndarray) -> SourceData:
+        """The antenna (the simulator's ``ant`` reflection) at ``temperature_k``, noiseless.
+
+        ``temperature_k``: one temperature, or one per channel (a sky's power law).
+        """
         c, freq = self.config, self.run.data.freq_hz
         return simulate_source(
             "ant", freq, reach_source_reflection("ant", freq), self.run.gamma_rec_true,

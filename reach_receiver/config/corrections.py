@@ -42,7 +42,7 @@ from .fields import REQUIRED, Fields
 #: The largest Touchstone file a site may name: a network of ~10^5 frequencies.
 MAX_TOUCHSTONE_BYTES = 8 * 1024 * 1024
 
-CALIBRATION_KEYS = ("band_hz", "solver", "mts", "cables", "rfi")
+CALIBRATION_KEYS = ("band_hz", "band_of_interest_hz", "solver", "mts", "cables", "rfi")
 _MTS_KEYS = ("sources", "lna")
 _COAX_KEYS = ("length_m", "velocity_factor", "loss_db_per_m", "ref_freq_hz", "loss_exponent")
 _CABLE_KEYS = ("thermocouple", "s2p", *_COAX_KEYS)

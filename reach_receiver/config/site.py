@@ -13,6 +13,9 @@ A YAML mapping, safe-loaded with line numbers; every mistake is reported at once
                                       # period_s required; source: the iTPM's address
     calibration: {band_hz: [50.0e+6, 130.0e+6], solver: radiometric}   # the engine's band
                                   # and solver (the defaults; calibration.solve.solvers.METHODS);
+                                  # band_of_interest_hz: [lo, hi] within it, where the
+                                  # calibrate_adaptive step weighs the antenna's error
+                                  # (default: the whole band);
                                   # corrections: reach_receiver.config.corrections
     references: {test_load: /etc/reach/test_load_pnax.s1p}   # lab (PNA-X) S11 of MS2-6
     sources: {hot: {ms1: 6}, r100: {ms1: 2}, c2r27: null}   # changes to table A.2
@@ -92,6 +95,7 @@ class SiteConfig:
     longitude_deg: float = 0.0
     latitude_deg: float = 0.0
     band_hz: tuple[float, float] = DEFAULT_BAND_HZ
+    band_of_interest_hz: tuple[float, float] | None = None
     references: Mapping[str, str] = field(default_factory=dict)
     simulation: Mapping[str, float] = field(default_factory=dict)
     sources: Mapping[str, SourcePosition] = field(default_factory=lambda: dict(REACH_SOURCES))
@@ -128,6 +132,8 @@ class SiteConfig:
         calibration: dict[str, Any] = (
             {"band_hz": list(self.band_hz)} if self.band_hz != DEFAULT_BAND_HZ else {}
         )
+        if self.band_of_interest_hz is not None:
+            calibration["band_of_interest_hz"] = list(self.band_of_interest_hz)
         if self.solver != DEFAULT_SOLVER:
             calibration["solver"] = self.solver
         if calibration or corrections_yaml(self.corrections):
@@ -171,6 +177,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
     name = place.text("name", "unnamed site") or "unnamed site"
     devices = _devices(reader)
     band = _band(reader)
+    interest = _band_of_interest(reader, band)
     solver = reader.section("calibration", CALIBRATION_KEYS).choice(
         "solver", METHODS, DEFAULT_SOLVER
     )
@@ -189,6 +196,7 @@ def parse_site(document: object, source: str = "<memory>") -> SiteConfig:
         longitude_deg=longitude,
         latitude_deg=latitude,
         band_hz=band,
+        band_of_interest_hz=interest,
         references={k: v for k, v in written_references.items() if v is not None},
         simulation=clock,
         sources=sources,
@@ -276,6 +284,34 @@ def _band(reader: SectionReader) -> tuple[float, float] | None:
         reader.report(line, "calibration.band_hz", message)
         return None
     return float(low), float(high)
+
+
+def _band_of_interest(
+    reader: SectionReader, band: tuple[float, float] | None
+) -> tuple[float, float] | None:
+    """``calibration.band_of_interest_hz``: ``[low, high]`` inside ``band_hz``, or None."""
+    calibration = reader.section("calibration", CALIBRATION_KEYS)
+    if not calibration.has("band_of_interest_hz"):
+        return None
+    written = calibration.raw("band_of_interest_hz")
+    numbers = (
+        isinstance(written, list) and len(written) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in written)
+    )
+    if not numbers or not 0 <= written[0] < written[1]:
+        calibration.report(
+            "band_of_interest_hz", f"must be [low, high] in Hz with 0 <= low < high, not {written}"
+        )
+        return None
+    low, high = float(written[0]), float(written[1])
+    if band is not None and (low < band[0] or high > band[1]):
+        calibration.report(
+            "band_of_interest_hz",
+            f"[{low:g}, {high:g}] must lie inside the calibration band "
+            f"[{band[0]:g}, {band[1]:g}] (band_hz)",
+        )
+        return None
+    return low, high
 
 
 def _sources(reader: SectionReader) -> dict[str, SourcePosition]:

@@ -2,7 +2,7 @@
 
 ``{sources: "${calibrators}", antenna: ant, target_mk: 5, budget_s: 36000,
 first_pass_s: 60, durations_s: [30, 60, 120, 300], overhead_s: 180, refresh_every: 4,
-band_hz: [60.0e+6, 120.0e+6], antenna_k: 298}``
+band_hz: [60.0e+6, 120.0e+6], antenna_k: 2500, antenna_index: -2.5}``
 
 Thesis 5.1's open problem, in the loop (:mod:`calibration.design.adaptive`): a first pass
 of one Dicke cycle of ``first_pass_s`` per position over every calibrator, then, from the
@@ -22,8 +22,11 @@ make it hours). ``overhead_s``, the switching and settling each cycle costs beyo
 ``3 t`` of integration, is by default measured: the median over the step's cycles so far
 (before any, the schedule timing's two spectra per position,
 ``6 x devices.spectrometer.period_s``). ``band_hz`` is the band of interest, by
-default the site's calibration band (``calibration.band_hz``); ``antenna_k`` the
-antenna's assumed temperature (its design row, 298 K by default).
+default the site's (``calibration.band_of_interest_hz``, else its calibration band
+``calibration.band_hz``); ``antenna_k`` the antenna's assumed temperature at 75 MHz and
+``antenna_index`` its spectral index (its design row: 298 K and flat by default, a load;
+about 2500 K and -2.5 for the sky, where far more of the time goes to the hot load,
+docs/adaptive.md).
 
 Every decision (its step, the instrument time, the predicted error, every candidate with
 its predicted error and gain, the choice or the stop) is a check named
@@ -72,6 +75,7 @@ class CalibrateAdaptive(Step):
     refresh_every: int = 4
     band_hz: tuple[float, float] | None = None
     antenna_k: float = 298.0
+    antenna_index: float = 0.0
     #: Set by :meth:`CalibrateAdaptiveKind.rest`: carry on from the decisions stored.
     resumed: bool = False
 
@@ -127,7 +131,7 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
     step_type = CalibrateAdaptive
     keys = (
         "sources", "antenna", "target_mk", "target_fraction", "budget_s", "first_pass_s",
-        "durations_s", "overhead_s", "refresh_every", "band_hz", "antenna_k",
+        "durations_s", "overhead_s", "refresh_every", "band_hz", "antenna_k", "antenna_index",
     )
 
     def parse(self, f: Fields, where: Where, ctx: ParseContext) -> CalibrateAdaptive:
@@ -159,6 +163,7 @@ class CalibrateAdaptiveKind(RunnableKind[CalibrateAdaptive]):
             refresh_every=f.count("refresh_every", 4),
             band_hz=_band(f, ctx),
             antenna_k=f.number("antenna_k", 298.0, low=0.0, open_low=True),
+            antenna_index=f.number("antenna_index", 0.0, low=-5.0, high=5.0),
         )
         cost = 3 * first + step.overhead(period)
         if not f.failed and cost * len(step.sources) > budget:

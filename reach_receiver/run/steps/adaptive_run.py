@@ -125,8 +125,14 @@ def _data(run: RunContext, step: CalibrateAdaptive) -> CalibrationData:
     return dataclasses.replace(data, sources={n: data.sources[n] for n in step.sources})
 
 
-def settings_of(step: CalibrateAdaptive, period_s: float) -> AdaptiveSettings:
-    """The planner's settings from the step (the step's overhead or the site's timing)."""
+def settings_of(
+    step: CalibrateAdaptive, period_s: float, site_band_hz: tuple[float, float] | None = None
+) -> AdaptiveSettings:
+    """The planner's settings from the step (the step's overhead or the site's timing).
+
+    The band of interest is the step's, else ``site_band_hz`` (the site's
+    ``calibration.band_of_interest_hz``), else the whole calibration band.
+    """
     return AdaptiveSettings(
         target_mk=step.target_mk,
         budget_s=step.budget_s,
@@ -134,8 +140,9 @@ def settings_of(step: CalibrateAdaptive, period_s: float) -> AdaptiveSettings:
         durations_s=step.durations_s,
         overhead_s=step.overhead(period_s),
         refresh_every=step.refresh_every,
-        band_hz=step.band_hz,
+        band_hz=step.band_hz or site_band_hz,
         antenna_temperature_k=step.antenna_k,
+        antenna_index=step.antenna_index,
     )
 
 
@@ -143,7 +150,7 @@ def run_adaptive(step: CalibrateAdaptive, run: RunContext) -> None:
     """The first pass, then decisions and their cycles until a stop (stored and logged)."""
     _check_reflections(run, step)
     where = str(step.where)
-    settings = settings_of(step, run.period_s)
+    settings = settings_of(step, run.period_s, run.site.band_of_interest_hz)
     previous = _previous_decisions(run, where) if step.resumed else []
     elapsed = 0.0
     if previous:  # resumed: the instrument time goes on from the last decision
