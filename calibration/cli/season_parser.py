@@ -46,6 +46,8 @@ made from its run with this solution is skipped ("skipped N done"), so an interr
 command continues where it stopped. A task per run on a local Dask cluster (--workers)
 or an existing one (--scheduler)."""
 
+#: The least memory a worker may be given (bytes): an idle worker process holds ~150 MiB.
+MIN_WORKER_MEMORY = 2**29
 _SIZE = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b?)\s*$", re.IGNORECASE)
 
 
@@ -57,8 +59,11 @@ def size_arg(text: str) -> int:
     number, prefix, suffix = match.groups()
     base = 1024 if suffix.lower().startswith("i") or not suffix else 1000
     value = float(number) * base ** " kmgt".index(prefix.lower() or " ")
-    if not (math.isfinite(value) and value >= 2**26):
-        raise argparse.ArgumentTypeError(f"expected at least 64MiB for a worker, got {text!r}")
+    if not (math.isfinite(value) and value >= MIN_WORKER_MEMORY):
+        raise argparse.ArgumentTypeError(
+            f"expected at least 512MiB for a worker (its interpreter and libraries take "
+            f"about 150MiB), got {text!r}"
+        )
     return int(value)
 
 

@@ -43,6 +43,7 @@ __all__ = [
     "archive_client",
     "default_memory",
     "guarded",
+    "out_of_memory",
     "season_on_dask",
 ]
 
@@ -127,7 +128,9 @@ def archive_client(
     try:
         cluster = LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=processes,
-            memory_limit=memory, dashboard_address=":0", silence_logs=logging.ERROR,
+            # a thread worker's limit would be this whole process's memory: chunks only
+            memory_limit=memory if processes else 0, dashboard_address=":0",
+            silence_logs=logging.ERROR,
         )
     except (RuntimeError, OSError) as err:
         raise InvalidDataError(
@@ -135,11 +138,17 @@ def archive_client(
             "--workers 1 (in this process) or --scheduler ADDRESS"
         ) from None
     with cluster, Client(cluster) as client:
-        kind = f"{workers} worker processes" if processes else "1 worker (a thread here)"
-        yield Cluster(
-            client, f"dask: local cluster, {kind}, {_gib(memory)} memory limit per worker",
-            workers, memory,
-        )
+        kind = (f"{workers} worker processes, {_gib(memory)} memory limit each" if processes
+                else f"1 worker (a thread here), chunks sized to {_gib(memory)}")
+        yield Cluster(client, f"dask: local cluster, {kind}", workers, memory)
+
+
+def out_of_memory(err: BaseException, memory: int) -> InvalidDataError:
+    """The message of a task whose worker was killed (its memory limit, as a rule)."""
+    return InvalidDataError(
+        f"a Dask worker died running a task ({type(err).__name__}), most likely over its "
+        f"memory limit of {_gib(memory)}: give --memory-per-worker more, or fewer --workers"
+    )
 
 
 class Progress:
@@ -192,7 +201,7 @@ def season_on_dask(
     cluster: Cluster, runs: Sequence[str], edges_h: FloatArray, stream: TextIO | None = None
 ) -> Season:
     """The season of ``runs`` computed on ``cluster`` (module doc)."""
-    from distributed import as_completed
+    from distributed import KilledWorker, as_completed
 
     client = cluster.client
     chunks = _chunks(client, runs, cluster.memory_per_worker)
@@ -222,6 +231,8 @@ def season_on_dask(
         for future in as_completed(list(leaves)):
             progress.step(leaves.pop(future))
         total = raise_failure(root.result())
+    except KilledWorker as err:
+        raise out_of_memory(err, cluster.memory_per_worker) from None
     finally:
         root.cancel()
     return combine([total])

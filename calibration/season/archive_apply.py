@@ -34,7 +34,7 @@ from ..core.errors import InvalidDataError
 from ..io.calibrated_spectra import solution_digest
 from ..io.solution_file import write_solution_group
 from ..solve.solvers import AnySolution
-from .archive import Cluster, Progress, guarded, raise_failure
+from .archive import Cluster, Progress, guarded, out_of_memory, raise_failure
 from .recalibrate import check_run, recalibrated_run_bytes
 
 __all__ = ["digest_of", "output_paths", "recalibrate_file", "recalibrate_on_dask", "split_done"]
@@ -114,7 +114,7 @@ def recalibrate_on_dask(
     stream: TextIO | None = None,
 ) -> int:
     """Check every run, then recalibrate each (module doc); the spectra written."""
-    from distributed import as_completed
+    from distributed import KilledWorker, as_completed
 
     if not todo:
         return 0
@@ -137,7 +137,10 @@ def recalibrate_on_dask(
     written = 0
     failure = None
     for future in as_completed(list(futures)):
-        result = future.result()
+        try:
+            result = future.result()
+        except KilledWorker as err:
+            raise out_of_memory(err, cluster.memory_per_worker) from None
         if isinstance(result, int):
             written += result
         elif failure is None:
