@@ -35,9 +35,11 @@ from reach_receiver.store import RunStore
 from reach_receiver.store.handover import HandOver
 from tests.test_season import SITE_YAML, Night, cycles, make_night, night_times, sky_k
 
-#: Independent numbers a solution's error over 5 MHz holds at least: the noise waves'
-#: polynomial coefficients (orders 1-5 each of five terms) seen through the antenna.
-COEFFICIENTS_A_SOLUTION = 8
+#: Independent numbers a solution's error over the band holds (its noise waves'
+#: coefficients seen through the antenna): a run's mean residual z^2 over 819 channels
+#: scattered over 13 runs as 6.5 independent terms would (benchmark's week, seed 0),
+#: radiometer part included; fewer for the calibration part alone.
+COEFFICIENTS_A_SOLUTION = 5
 #: Standard deviations of a statistic that a test allows.
 SIGMAS = 4.0
 #: The family the short week's plan is drawn from (the benchmark runs seeds over it).
@@ -102,7 +104,7 @@ def test_each_error_part_against_the_scatter_of_its_own_source(week):
     assert abs(sums.ratio_r - 1.0) < SIGMAS * math.sqrt(2.0 / sums.dof), sums.ratio_r
     # the runs' residuals: a solution's error holds few independent numbers
     sd_c = math.sqrt(2.0 / (COEFFICIENTS_A_SOLUTION * sums.runs))
-    assert abs(sums.ratio_c - 1.0) < SIGMAS * sd_c + 0.5, sums.ratio_c
+    assert abs(sums.ratio_c - 1.0) < SIGMAS * sd_c, sums.ratio_c
 
 
 # ------------------------------------------------------------------ the night's flags
