@@ -9,7 +9,6 @@ against a real ``reachd --sim`` as a summary within 80 columns.
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 import time
@@ -100,7 +99,6 @@ def test_reachd_refuses_a_site_out_in_a_missing_directory_before_it_starts():
     assert time.monotonic() - started < 10  # no simulator was started
 
 
-@pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash")
 def test_the_completion_script_completes_the_words_in_bash():
     script = cli("completion", "bash").stdout
     show = '; _reach_run; echo "${COMPREPLY[@]}"'

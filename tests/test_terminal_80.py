@@ -1,14 +1,14 @@
 """What an operator reads in an 80x24 terminal: no line wider than 80 columns.
 
 The commands run inside a real tmux at 80x24; ``capture-pane -J`` joins the lines the
-terminal wrapped, so a line that did not fit shows as one longer than 80.
+terminal wrapped, so a line that did not fit shows as one longer than 80. tmux is
+Debian's package, which ``.ci/run`` installs where it is missing.
 """
 
 from __future__ import annotations
 
 import os
 import shlex
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -23,23 +23,35 @@ from reach_receiver.daemon.protocol import Closed, ControlError
 
 ROOT = Path(__file__).resolve().parents[1]
 ENTRY = "import sys; from reach_receiver.cli import {main}; sys.exit({main}(sys.argv[1:]))"
+#: A short calibration, as tests/test_follow_output.py follows it.
+FOLLOWED = """\
+schedule: follow
+steps:
+  - initialise: {}
+  - temperatures: {period_s: 10}
+  - vna_calibrate: {}
+  - s11: {targets: [cold, hot, c10open, c10short, ant, lna]}
+  - dicke: {sources: [cold, hot, c10open, c10short], seconds: 60}
+  - calibrate: {}
+  - safe: {}
+"""
 
-pytestmark = pytest.mark.skipif(shutil.which("tmux") is None, reason="needs tmux")
 
-
-def in_tmux(tmp_path: Path, *args: str, main: str = "run_main") -> list[str]:
+def in_tmux(
+    tmp_path: Path, *args: str, main: str = "run_main", within_s: float = 60.0
+) -> list[str]:
     """Run a command in a detached 80x24 tmux; its lines as the terminal showed them."""
     tmp_path = Path(tempfile.mkdtemp(dir=tmp_path))  # one per command
     socket = str(tmp_path / "tmux.sock")
     done = tmp_path / "done"
     command = shlex.join([sys.executable, "-c", ENTRY.format(main=main), *args])
-    script = f"cd {shlex.quote(str(ROOT))}; {command}; touch {shlex.quote(str(done))}; sleep 60"
+    script = f"cd {shlex.quote(str(ROOT))}; {command}; touch {shlex.quote(str(done))}; sleep 600"
     tmux = ["tmux", "-S", socket, "-f", "/dev/null"]
     env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "", "LINES": ""}
     subprocess.run([*tmux, "new-session", "-d", "-x", "80", "-y", "24", "sh", "-c", script],
                    check=True, env=env, timeout=30)
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + within_s
         while not done.exists():
             assert time.monotonic() < deadline, "the command did not end"
             time.sleep(0.1)
@@ -100,3 +112,20 @@ def test_status_is_a_summary_within_80_columns(tmp_path, reachd):
     every = in_tmux(tmp_path, "status", "--all", "--site", str(reachd))
     assert len(every) > len(lines)
     assert max(map(len, every)) <= 80, max(every, key=len)
+
+
+def test_a_followed_job_fits_80_columns(tmp_path, reachd):
+    """``reach-run SCHEDULE`` against the daemon, followed to its end as an operator sees it.
+
+    Every line within 80 columns, a path counted as the short one an operator's would be
+    (this test's directory is pytest's, some 60 characters); the job's result and its
+    end are on the screen.
+    """
+    schedule = tmp_path / "follow.yaml"
+    schedule.write_text(FOLLOWED)
+    lines = in_tmux(tmp_path, "--site", str(reachd), str(schedule), within_s=240.0)
+    assert lines[-1] == "job 1 completed", lines
+    assert any("noise scale s^2" in line for line in lines), lines
+    shown = [line.replace(str(tmp_path), "/srv/reach") for line in lines]
+    wide = [line for line in shown if len(line) > 80]
+    assert not wide, wide
