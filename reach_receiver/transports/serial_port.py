@@ -8,13 +8,22 @@ real ports (``/dev/ttyACM0``) and the simulators' pseudo-terminals (``/dev/pts/N
 A port is opened for one program at a time (pyserial's ``exclusive``, an advisory
 ``flock``): a second driver on the same line would interleave its requests with ours and
 could take our replies, so it is refused with a clear error instead.
+
+Nor is a port opened that is some process's controlling terminal (:func:`terminal_owner`):
+a simulator's pseudo-terminal that went away leaves its number (``/dev/pts/N``) to the
+next terminal the kernel opens, an operator's ssh or tmux session among them, and a
+driver retrying the old path would put that terminal in raw mode and write its
+commands into it. An instrument's line (a USB CDC device, a simulator's pty) is nobody's
+controlling terminal.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import termios
 import time
+from pathlib import Path
 
 import serial
 
@@ -23,6 +32,32 @@ from reach_receiver.errors import ConnectionLost, DeviceTimeout, ProtocolError, 
 #: What a port that went away raises: pyserial's own error, the OS's (EIO on a vanished
 #: USB device or pty), and termios's, which is not an OSError (``tcflush``, ``TIOCINQ``).
 LINK_ERRORS = (serial.SerialException, OSError, termios.error)
+
+
+def terminal_owner(port: str, proc: Path = Path("/proc")) -> int | None:
+    """A process whose controlling terminal ``port`` is, or None (none, or not a device).
+
+    Read from each process's ``stat`` (field 7, ``tty_nr``: the controlling terminal's
+    device number, proc(5)) against the port's ``st_rdev``; processes that end while
+    being read are passed over.
+    """
+    try:
+        device = os.stat(port).st_rdev
+    except OSError:
+        return None
+    if device == 0:
+        return None
+    for entry in proc.iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2 :].split()  # after the command's name
+        if len(fields) > 4 and fields[4].lstrip("-").isdigit() and int(fields[4]) == device:
+            return int(entry.name)
+    return None
 
 
 class SerialTransport:
@@ -58,6 +93,13 @@ class SerialTransport:
         """Open the port (no bytes are exchanged)."""
         if self.is_open:
             return
+        owner = terminal_owner(self.port)
+        if owner is not None:
+            raise ConnectionLost(
+                self.device,
+                f"will not open {self.port}: it is the terminal of process {owner}, not an "
+                "instrument (a simulator's old pseudo-terminal number, taken by a login?)",
+            )
         try:
             self._serial = serial.Serial(
                 self.port,
