@@ -36,9 +36,13 @@ LONGEST_FIRST = (
     "test_identifiability.py",  # 86 s
     "test_consistency.py",  # 85 s
     "test_daemon.py",  # 76 s
+    "test_adaptive_step.py",  # about 75 s (three runs to a target or a budget)
     "test_status_page.py",  # 67 s
+    "test_terminal_80.py",  # about 65 s (a followed job in tmux)
     "test_solver_choice.py",  # 63 s
     "test_healthy_day.py",  # 56 s
+    "test_sim_corrections.py",  # about 45 s
+    "test_term_prior.py",  # about 45 s
 )
 
 
