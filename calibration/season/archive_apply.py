@@ -2,15 +2,14 @@
 
 Each run ``.../<name>/run.h5`` (or ``<name>.h5``) becomes ``OUT/<name>/run.h5``: its
 calibrated antenna cycles calibrated again with the solution
-(:func:`calibration.season.recalibrate.recalibrated_run_bytes`), a run file that
+(:func:`calibration.season.recalibrate.write_recalibrated_run`), a run file that
 ``reach-cal season OUT/*`` reads. The work is two rounds of tasks on the cluster
 (:func:`calibration.season.archive.archive_client`): every run is checked first (it has
 calibrated cycles whose hand-over measurements cover the solution's band and grid), so
 that a bad input stops the command before anything is written; then each run is
-recalibrated and written atomically by its task
-(:func:`calibration.core.atomic_file.write_atomically`: a temporary file renamed over
-the target), so a killed command leaves no partial ``run.h5``, only a hidden temporary
-file that is never read.
+recalibrated and written atomically by its task (a hidden temporary file beside the
+target, flushed and renamed over it: :func:`recalibrate_file`), so a killed command
+leaves no partial ``run.h5``, only a hidden temporary file that is never read.
 
 Resuming: an output that exists holds the digest of the solution that made it and the
 run it came from (root attributes ``solution_digest``, ``recalibrated_from``); one made
@@ -22,6 +21,7 @@ from __future__ import annotations
 
 import io
 import os
+import secrets
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,13 +29,12 @@ from typing import Any, TextIO
 
 import h5py
 
-from ..core.atomic_file import write_atomically
 from ..core.errors import InvalidDataError
 from ..io.calibrated_spectra import solution_digest
 from ..io.solution_file import write_solution_group
 from ..solve.solvers import AnySolution
 from .archive import Cluster, Progress, guarded, out_of_memory, raise_failure
-from .recalibrate import check_run, recalibrated_run_bytes
+from .recalibrate import check_run, write_recalibrated_run
 
 __all__ = ["digest_of", "output_paths", "recalibrate_file", "recalibrate_on_dask", "split_done"]
 
@@ -101,11 +100,34 @@ def recalibrate_file(
     run: str, out: str, solution: AnySolution, solution_file: str, solution_time: float,
     intervals: bool,
 ) -> int:
-    """Recalibrate one run into ``out`` atomically; its number of spectra."""
-    data = recalibrated_run_bytes(run, solution, solution_file, solution_time, intervals)
-    write_atomically(Path(out), data)
-    with h5py.File(io.BytesIO(data), "r") as f:
-        return sum(1 for g in f["measurements"].values() if g.attrs["kind"] == "calibrated")
+    """Recalibrate one run into ``out`` atomically; its number of spectra.
+
+    The file is written beside ``out`` under a hidden temporary name, flushed to disk and
+    renamed over it (the protocol of :func:`calibration.core.atomic_file.write_atomically`,
+    on a file too large to build in memory: a night of cycles at 16k channels is GBs).
+    """
+    target = Path(out)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        with h5py.File(tmp, "w") as f:
+            n = write_recalibrated_run(run, f, solution, solution_file, solution_time,
+                                       intervals)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    fd = os.open(target.parent, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    return n
 
 
 def recalibrate_on_dask(

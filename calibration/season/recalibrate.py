@@ -56,6 +56,7 @@ __all__ = [
     "interpolate_s11",
     "recalibrated_run_bytes",
     "run_cycles",
+    "write_recalibrated_run",
 ]
 
 #: The receiver's own reflection among a run's S11s.
@@ -234,18 +235,28 @@ def recalibrated_run_bytes(
     path: str, solution: AnySolution, solution_file: str, solution_time: float,
     intervals: bool = False,
 ) -> bytes:
-    """The run file of ``path``'s calibrated cycles calibrated with ``solution`` (module doc).
+    """:func:`write_recalibrated_run`'s file as bytes (built in memory: small runs, tests)."""
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as out:
+        write_recalibrated_run(path, out, solution, solution_file, solution_time, intervals)
+    return buffer.getvalue()
+
+
+def write_recalibrated_run(
+    path: str, out: h5py.File, solution: AnySolution, solution_file: str,
+    solution_time: float, intervals: bool = False,
+) -> int:
+    """Write into ``out`` the run of ``path``'s cycles calibrated with ``solution`` (module doc).
 
     ``solution_time`` (Unix s) is the new solution's time stamp, which orders solutions in
     a season. ``intervals`` adds the credible intervals' ends (``lower_68`` ...), as the
     observe step stores them; a season does not read them, and for a model-averaged
     solution their mixture quantiles take most of the time (about 1.5 s a cycle of 6554
-    channels against 0.2 s for the rest). The file is built in memory; the caller writes
-    it atomically.
+    channels against 0.2 s for the rest). One cycle is in memory at a time. Returns the
+    number of spectra written.
     """
-    buffer = io.BytesIO()
     band = band_hz(solution)
-    with _open(path) as f, h5py.File(buffer, "w") as out:
+    with _open(path) as f:
         cycles = run_cycles(f, path)
         thresholds = _thresholds(cycles.nights)
         out.attrs.update(
@@ -297,7 +308,7 @@ def recalibrated_run_bytes(
             by_name[name] = (new.name, np.asarray(spectrum.mean), flags, inputs.freq_hz)
         for night in cycles.nights:
             _night(measurements, night, by_name)
-    return buffer.getvalue()
+        return len(cycles.calibrated)
 
 
 def _night(
