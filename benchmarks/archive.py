@@ -119,12 +119,11 @@ def time_season(runs: list[str], workers: int) -> dict[str, Any]:
 
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                       memory_limit=MEMORY_PER_WORKER, dashboard_address=":0") as cluster, \
-            Client(cluster) as client:
+            Client(cluster) as client, open(os.devnull, "w") as quiet:  # not the table
         idle = client.run(_reset_peak)
         start = time.perf_counter()
         season = season_on_dask(Cluster(client, f"{workers} workers", workers,
-                                        MEMORY_PER_WORKER), runs, lst_edges(1.0),
-                                open(os.devnull, "w"))  # noqa: SIM115 - the progress is not the table
+                                        MEMORY_PER_WORKER), runs, lst_edges(1.0), quiet)
         wall = time.perf_counter() - start
         peaks = client.run(_peak)
     return {"wall": wall, "idle": max(idle.values()), "peak": max(peaks.values()),
