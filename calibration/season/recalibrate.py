@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -34,13 +33,13 @@ from typing import Any
 import h5py
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 from ..checks.rfi import flag_sky
 from ..checks.rfi_night import flag_night
 from ..core.errors import FileFormatError, InvalidDataError
 from ..io.calibrated_spectra import solution_digest
 from ..io.hdf5_io import RECEIVER_RUN_FORMAT, software_version
+from ..io.receiver_grid import band_channels, interpolate_s11
 from ..io.solution_file import write_solution_group
 from ..model.data import Integration, SourceData, check_source
 from ..model.reflection_noise import trace_noise
@@ -51,9 +50,7 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     "CycleInputs",
-    "band_channels",
     "cycle_inputs",
-    "interpolate_s11",
     "recalibrated_run_bytes",
     "run_cycles",
     "write_recalibrated_run",
@@ -65,27 +62,6 @@ RECEIVER = "lna"
 POSITIONS = ("source", "load", "ns")
 #: The threshold (sigma) of a cycle whose night recorded none: the observe step's default.
 DEFAULT_THRESHOLD = 5.0
-
-
-def band_channels(channel_width_hz: float, band: tuple[float, float]) -> slice:
-    """Channels ``k`` whose centres ``k * channel_width_hz`` lie in ``band`` (1e-9 slack)."""
-    first = math.ceil(band[0] / channel_width_hz - 1e-9)
-    last = math.floor(band[1] / channel_width_hz + 1e-9)
-    return slice(first, last + 1)
-
-
-def interpolate_s11(
-    freq_s11: NDArray[Any], s11: NDArray[Any], freq_hz: NDArray[Any]
-) -> NDArray[np.complex128] | None:
-    """The reflection at ``freq_hz`` by cubic splines of Re and Im; ``None`` if not covered."""
-    f_s11 = np.asarray(freq_s11, dtype=float)
-    f = np.asarray(freq_hz, dtype=float)
-    if f_s11.size < 4 or f.min() < f_s11[0] or f.max() > f_s11[-1]:
-        return None
-    gamma = np.asarray(s11, dtype=complex)
-    real = CubicSpline(f_s11, gamma.real)(f)
-    imag = CubicSpline(f_s11, gamma.imag)(f)
-    return np.asarray(real + 1j * imag, dtype=complex)
 
 
 @dataclass(frozen=True)

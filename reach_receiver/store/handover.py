@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -53,9 +52,9 @@ from typing import Any
 import h5py
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 from calibration.io.hdf5_io import RECEIVER_RUN_FORMAT, RunLayout, read_run_layout
+from calibration.io.receiver_grid import band_channels, interpolate_s11
 from calibration.model.reflection_noise import trace_noise
 from reach_receiver.frontend.layout import NOISE_SOURCE_MODEL
 
@@ -80,30 +79,9 @@ Groups = Mapping[int, Any]
 """Measurement number -> its open HDF5 group (attributes ``kind`` and ``name``)."""
 
 
-def band_channels(channel_width_hz: float, band_hz: tuple[float, float]) -> slice:
-    """Channels ``k`` whose centres ``k * channel_width_hz`` lie in ``band_hz`` (1e-9 slack)."""
-    first = math.ceil(band_hz[0] / channel_width_hz - 1e-9)
-    last = math.floor(band_hz[1] / channel_width_hz + 1e-9)
-    return slice(first, last + 1)
-
-
 def channel_frequencies(channel_width_hz: float, channels: slice) -> NDArray[np.float64]:
     """The centre frequencies of a slice of channels (Hz)."""
     return channel_width_hz * np.arange(channels.start, channels.stop, dtype=float)
-
-
-def interpolate_s11(
-    freq_s11: NDArray[Any], s11: NDArray[Any], freq_hz: NDArray[Any]
-) -> NDArray[np.complex128] | None:
-    """The reflection at ``freq_hz``; ``None`` when the sweep does not cover them."""
-    f_s11 = np.asarray(freq_s11, dtype=float)
-    f = np.asarray(freq_hz, dtype=float)
-    if f_s11.size < 4 or f.min() < f_s11[0] or f.max() > f_s11[-1]:
-        return None
-    gamma = np.asarray(s11, dtype=complex)
-    real = CubicSpline(f_s11, gamma.real)(f)
-    imag = CubicSpline(f_s11, gamma.imag)(f)
-    return np.asarray(real + 1j * imag, dtype=complex)
 
 
 @dataclass(frozen=True)
