@@ -50,18 +50,26 @@ pytestmark = pytest.mark.timeout(600)
 
 
 def closure(name: str) -> dict[str, metadata.Distribution]:
-    """The installed distribution ``name`` and everything it needs, by canonical name."""
+    """The installed distribution ``name`` and everything it needs, by canonical name.
+
+    Extras are followed: ``dask[distributed]`` brings ``dask`` and the requirements its
+    metadata marks ``extra == "distributed"``.
+    """
     found: dict[str, metadata.Distribution] = {}
-    todo = [name]
+    seen: set[tuple[str, frozenset[str]]] = set()
+    todo: list[tuple[str, frozenset[str]]] = [(name, frozenset())]
     while todo:
-        key = canonicalize_name(todo.pop())
-        if key in found:
+        raw, extras = todo.pop()
+        key = canonicalize_name(raw)
+        if (key, extras) in seen:
             continue
-        found[key] = metadata.distribution(key)
-        for line in found[key].requires or []:
+        seen.add((key, extras))
+        dist = found.setdefault(key, metadata.distribution(key))
+        for line in dist.requires or []:
             requirement = Requirement(line)
-            if requirement.marker is None or requirement.marker.evaluate({"extra": ""}):
-                todo.append(requirement.name)
+            marker = requirement.marker
+            if marker is None or any(marker.evaluate({"extra": e}) for e in ("", *extras)):
+                todo.append((requirement.name, frozenset(requirement.extras)))
     return found
 
 
