@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import io
 import os
-import secrets
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import Any, TextIO
 
 import h5py
 
+from ..core.atomic_file import replacing
 from ..core.errors import InvalidDataError
 from ..io.calibrated_spectra import solution_digest
 from ..io.solution_file import write_solution_group
@@ -103,30 +103,11 @@ def recalibrate_file(
     """Recalibrate one run into ``out`` atomically; its number of spectra.
 
     The file is written beside ``out`` under a hidden temporary name, flushed to disk and
-    renamed over it (the protocol of :func:`calibration.core.atomic_file.write_atomically`,
-    on a file too large to build in memory: a night of cycles at 16k channels is GBs).
+    renamed over it (:func:`calibration.core.atomic_file.replacing`: a file too large to
+    build in memory, a night of cycles at 16k channels being GBs).
     """
-    target = Path(out)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        with h5py.File(tmp, "w") as f:
-            n = write_recalibrated_run(run, f, solution, solution_file, solution_time,
-                                       intervals)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    fd = os.open(target.parent, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+    with replacing(Path(out)) as tmp, h5py.File(tmp, "w") as f:
+        n = write_recalibrated_run(run, f, solution, solution_file, solution_time, intervals)
     return n
 
 
