@@ -107,8 +107,12 @@ def run_spectra(night: Night, spectra, times: np.ndarray, flags=None, path="mem"
     )
 
 
-def write_run(directory: Path, night: Night, spectra, times, flags=None) -> Path:
-    """A receiver run file with the solution, each cycle and its calibrated spectrum."""
+def write_run(directory: Path, night: Night, spectra, times, flags=None,
+              night_flags=None) -> Path:
+    """A receiver run file with the solution, each cycle and its calibrated spectrum.
+
+    ``night_flags`` ``(cycle, channel)``: also the observe step's ``rfi_night_ant`` check.
+    """
     freq = spectra[0].freq_hz
     store = RunStore(directory, name="night", schedule_files=[], site_yaml=SITE_YAML,
                      metadata={}, channel_width_hz=night.sim.data.channel_width_hz,
@@ -137,6 +141,11 @@ def write_run(directory: Path, night: Night, spectra, times, flags=None) -> Path
                         "std_radiometer": spectrum.std_measurement},
                 handover=handover,
             )
+        if night_flags is not None:
+            store.add_check("rfi_night_ant", True, timestamp=times[-1] + 700,
+                            details={"spectra": [f"ant_{i:04d}" for i in range(len(spectra))],
+                                     "threshold_sigma": 5.0},
+                            arrays={"flags": night_flags})
     return directory / "run.h5"
 
 

@@ -28,12 +28,9 @@ import pytest
 from benchmarks.season_week import Sums, WeekPlan, add_run, add_season, run_week, season_of
 from calibration.cli import main
 from calibration.io.calibrated_spectra import read_calibrated_spectra
-from calibration.model.reflections import reach_source_reflection
 from calibration.season.binning import Season
 from calibration.season.season_file import read_season
-from reach_receiver.store import RunStore
-from reach_receiver.store.handover import HandOver
-from tests.test_season import SITE_YAML, Night, cycles, make_night, night_times, sky_k
+from tests.test_season import Night, cycles, make_night, night_times, sky_k, write_run
 
 #: Independent numbers a solution's error over the band holds (its noise waves'
 #: coefficients seen through the antenna): a run's mean residual z^2 over 819 channels
@@ -119,38 +116,8 @@ def _night_run(directory: Path, night: Night, n: int, night_flags: np.ndarray,
     spectra = [dataclasses.replace(s, mean=np.where(f, 1e6, s.mean))
                for s, f in zip(spectra, night_flags, strict=True)]
     times = night_times(0, n, step_s=600.0)  # every cycle in LST bin 2
-    store = RunStore(directory, name="night", schedule_files=[], site_yaml=SITE_YAML,
-                     metadata={}, channel_width_hz=night.sim.data.channel_width_hz,
-                     band_hz=(freq[0], freq[-1]))
-    names = [f"ant_{i:04d}" for i in range(n)]
-    positions = ("source", "load", "ns")
-    with store:
-        s11 = {"ant": store.add_s11("ant", freq, reach_source_reflection("ant", freq),
-                                    timestamp=times[0], settings={}, calibrated=True),
-               "lna": store.add_s11("lna", freq, night.sim.data.gamma_rec,
-                                    timestamp=times[0], settings={}, calibrated=True)}
-        store.add_solution(night.solution, timestamp=times[0] - 60, verification={})
-        for name, spectrum, t in zip(names, spectra, times, strict=True):
-            number = store.add_dicke(
-                "ant", spectra={p: np.ones((1, freq.size)) for p in positions},
-                timestamps={p: [t - 5, t + 5] for p in positions},
-                integration_s=dict.fromkeys(positions, 300.0),
-                n_spectra=dict.fromkeys(positions, 2), temperature_k=None,
-                switch_states={}, counters={}, timestamp=t + 600,
-            )
-            handover = HandOver((freq[0], freq[-1]), night.sim.data.channel_width_hz,
-                                {"ant": (number,)}, s11, ())
-            store.add_calibrated(
-                name, freq, spectrum.mean, spectrum.std, np.zeros(freq.size, bool),
-                timestamp=t + 600, handover=handover,
-                errors={"std_calibration": spectrum.std_calibration,
-                        "std_radiometer": spectrum.std_measurement},
-            )
-        if store_flags:
-            store.add_check("rfi_night_ant", True, timestamp=times[-1] + 700,
-                            details={"spectra": names, "threshold_sigma": 5.0},
-                            arrays={"flags": night_flags})
-    return directory / "run.h5"
+    return write_run(directory, night, spectra, times,
+                     night_flags=night_flags if store_flags else None)
 
 
 def _season(run: Path, out: Path) -> Season:
