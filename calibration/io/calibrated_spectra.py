@@ -45,7 +45,9 @@ from .hdf5_io import RECEIVER_RUN_FORMAT, PathLike
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-__all__ = ["RunSpectra", "Site", "SolutionRecord", "read_calibrated_spectra"]
+__all__ = [
+    "RunSpectra", "Site", "SolutionRecord", "open_run_file", "read_calibrated_spectra",
+]
 
 
 @dataclass(frozen=True)
@@ -146,20 +148,30 @@ def read_calibrated_spectra(path: PathLike) -> RunSpectra:
     :class:`~calibration.core.errors.FileFormatError` (not a receiver's run file).
     """
     where = os.fspath(path)
-    if not os.path.isfile(where):
-        raise InvalidDataError(f"{where}: no such run file")
-    try:
-        f = h5py.File(where, "r")
-    except OSError as err:
-        raise FileFormatError(f"{where}: not an HDF5 run file ({err})") from err
-    with f:
-        fmt = _text(f.attrs.get("format", ""))
-        if fmt != RECEIVER_RUN_FORMAT or "measurements" not in f:
-            raise FileFormatError(
-                f"{where}: not a receiver's run file (format {fmt!r}); a season reads the "
-                "run.h5 files reach-run writes"
-            )
+    with open_run_file(where) as f:
         return _read(f, where)
+
+
+def open_run_file(path: str) -> h5py.File:
+    """``path`` open for reading, checked to be a receiver's run file.
+
+    :class:`~calibration.core.errors.InvalidDataError` if there is no such file,
+    :class:`~calibration.core.errors.FileFormatError` if it is not HDF5 or not a run file.
+    """
+    if not os.path.isfile(path):
+        raise InvalidDataError(f"{path}: no such run file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise FileFormatError(f"{path}: not an HDF5 run file ({err})") from err
+    fmt = _text(f.attrs.get("format", ""))
+    if fmt != RECEIVER_RUN_FORMAT or "measurements" not in f:
+        f.close()
+        raise FileFormatError(
+            f"{path}: not a receiver's run file (format {fmt!r}); a season reads the "
+            "run.h5 files reach-run writes"
+        )
+    return f
 
 
 def _read(f: h5py.File, where: str) -> RunSpectra:

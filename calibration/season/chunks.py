@@ -25,7 +25,7 @@ from typing import Any, cast
 import h5py
 import numpy as np
 
-from ..core.errors import FileFormatError, InvalidDataError
+from ..core.errors import InvalidDataError
 from ..core.sidereal import apparent_lst_h
 from ..io.calibrated_spectra import (
     RunSpectra,
@@ -33,9 +33,9 @@ from ..io.calibrated_spectra import (
     _site,
     _spectrum,
     _text,
+    open_run_file,
     solution_digest,
 )
-from ..io.hdf5_io import RECEIVER_RUN_FORMAT
 from .binning import BinnedRun, FloatArray, bin_run
 
 __all__ = ["ROW_ARRAYS", "bin_rows", "count_rows", "read_rows", "rows_per_chunk"]
@@ -50,23 +50,6 @@ def rows_per_chunk(n_channels: int, budget_bytes: float) -> int:
     return max(1, int(budget_bytes // (ROW_ARRAYS * 8 * max(n_channels, 1))))
 
 
-def _open(path: str) -> h5py.File:
-    if not os.path.isfile(path):
-        raise InvalidDataError(f"{path}: no such run file")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as err:
-        raise FileFormatError(f"{path}: not an HDF5 run file ({err})") from err
-    fmt = _text(f.attrs.get("format", ""))
-    if fmt != RECEIVER_RUN_FORMAT or "measurements" not in f:
-        f.close()
-        raise FileFormatError(
-            f"{path}: not a receiver's run file (format {fmt!r}); a season reads the "
-            "run.h5 files reach-run writes"
-        )
-    return f
-
-
 def _no_rows(path: str) -> InvalidDataError:
     return InvalidDataError(
         f"{path}: no calibrated spectra (observe calibrates its cycles once the run has "
@@ -76,7 +59,7 @@ def _no_rows(path: str) -> InvalidDataError:
 
 def count_rows(path: str) -> tuple[int, int]:
     """The run's number of calibrated spectra and their channels (names and one shape)."""
-    with _open(path) as f:
+    with open_run_file(path) as f:
         by_number = _Measurements(f["measurements"])
         numbers = [n for n in by_number if by_number.kind_and_name(n)[0] == "calibrated"]
         if not numbers:
@@ -111,7 +94,7 @@ class _Measurements(Mapping[int, h5py.Group]):
 
 def read_rows(path: str, start: int, stop: int) -> RunSpectra:
     """Rows ``[start, stop)`` of the run's calibrated spectra (module doc)."""
-    with _open(path) as f:
+    with open_run_file(path) as f:
         by_number = _Measurements(f["measurements"])
         solutions: list[SolutionRecord] = []
         rows: dict[int, dict[str, Any]] = {}
