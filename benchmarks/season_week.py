@@ -48,11 +48,13 @@ at a load of 5-12, about 620 s of real time a week)::
     radiometer part: variance ratio 1.006 (203917 degrees of freedom)
     calibration part: variance ratio 1.080 (83 solutions)
 
-A run's mean residual over 819 channels holds about 6.5 independent numbers (its z^2
-scattered so over the 13 runs of seed 0), so 83 solutions know the calibration ratio to
-about +-0.06: 1.080 is 1.3 of that above 1 (the calibration part stated some 4 % low in
-standard deviation, if anything), and the seeds scatter 0.70-1.50 about it. The
-6 alarms: ``device silent`` (the spectrometer or the Teensy), each a few simulated
+A solution's error over the band holds few independent numbers: its posterior says
+about 1.5 (:func:`calibration_numbers`; two nearly constant shapes over 5-10 MHz), and the
+seeds' spread of ``var c`` (0.70-1.50 over 14 solutions each, standard deviation 0.30)
+says 1.6. So 83 solutions know the calibration ratio to about +-0.12: 1.080 is 0.7 of
+that above 1, and the seeds scatter as they should about it.
+
+The 6 alarms: ``device silent`` (the spectrometer or the Teensy), each a few simulated
 minutes of the loaded machine's simulators behind their clock, and in seed 2 one
 ``calibration drift`` of 3.9 sigma on a receiver that does not drift.
 Seed 5 is a second run of that seed: the first stopped after 2.07 days when its
@@ -78,9 +80,13 @@ from typing import Any
 import numpy as np
 
 from calibration.core.sidereal import apparent_lst_h
-from calibration.io.calibrated_spectra import RunSpectra, read_calibrated_spectra
+from calibration.io.calibrated_spectra import RunSpectra, open_run_file, read_calibrated_spectra
+from calibration.io.solution_file import read_solution_group
+from calibration.report.writer import RUN_SOLUTION
 from calibration.season.binning import Season
+from calibration.season.recalibrate import cycle_inputs, run_cycles
 from calibration.season.season_file import read_season
+from calibration.solve.solvers import band_hz
 from reach_receiver.clock import CompressedClock, ManualClock
 from reach_receiver.config.site import load_site
 from reach_receiver.daemon.client import DaemonClient
@@ -263,6 +269,10 @@ class Sums:
     run_z2: float = 0.0
     run_n: int = 0
     runs: int = 0
+    #: Independent numbers in the runs' calibration errors (:func:`calibration_numbers`).
+    cal_numbers: float = 0.0
+    #: Variance the radiometer noise adds to ``cal_actual`` (its square and cross terms).
+    cal_noise_var: float = 0.0
     bins: int = 0
     radiometer_share: list[float] = field(default_factory=list)
 
@@ -318,6 +328,33 @@ def add_run(sums: Sums, run: RunSpectra) -> None:
     sums.run_z2 += float(np.sum(residual**2 / (stated + 1.0 / total[ok])))
     sums.run_n += int(ok.sum())
     sums.runs += 1
+    sums.cal_numbers += calibration_numbers(run.path)
+    noise = 1.0 / total[ok]
+    sums.cal_noise_var += float(2.0 * np.sum(noise**2) + 4.0 * np.sum(stated * noise))
+
+
+def calibration_numbers(path: str) -> float:
+    """How many independent numbers a run's calibration error over its band holds.
+
+    The error a solution leaves in the calibrated antenna is ``X (theta - theta_true)``,
+    ``X`` the antenna's design rows (eq. 3.27), so its covariance over the channels is
+    ``C = X Sigma X^T`` with ``Sigma`` the posterior's. With ``R`` its correlation matrix,
+    ``sum_i z_i^2`` over ``n`` channels has the variance ``2 tr(R^2)`` (a Gaussian
+    quadratic form), that of ``n_eff = n^2 / tr(R^2)`` independent terms. ``X`` is the
+    mean of the run's calibrated cycles' rows (its antenna changes little over a night).
+    """
+    with open_run_file(path) as f:
+        cycles = run_cycles(f, path)
+        solution = read_solution_group(f[RUN_SOLUTION], path)
+        rows = [
+            solution.design_rows(i.freq_hz, i.gamma_rec, i.source.gamma, i.source.q)
+            for i in (cycle_inputs(cycles.by_number, json.loads(g.attrs["handover"]),
+                                   band_hz(solution), path) for g in cycles.calibrated)
+        ]
+    x = np.mean(rows, axis=0)
+    c = x @ solution.posterior.covariance @ x.T
+    d = np.sqrt(np.diag(c))
+    return float(d.size**2 / np.sum((c / np.outer(d, d)) ** 2))
 
 
 def analyse(sums: Sums, week: Week, directory: Path, lst_bin_h: float) -> Season:
@@ -386,7 +423,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"radiometer part, a run's cycles' scatter / stated: variance ratio "
           f"{sums.ratio_r:.3f} ({sums.dof} degrees of freedom)")
     print(f"calibration part, runs' mean residual / stated: variance ratio {sums.ratio_c:.3f} "
-          f"({sums.runs} solutions); whole error of a run's mean: RMS z {sums.run_rms:.3f}")
+          f"({sums.runs} solutions, {sums.cal_numbers:.0f} independent numbers)")
+    print(f"whole error of a run's mean: RMS z {sums.run_rms:.3f}")
     print(f"radiometer share of a bin's variance: mean {np.mean(sums.radiometer_share):.2f}; "
           f"var r, var c: actual over stated variance of each part, per seed")
     return 0 if ok else 1
