@@ -86,6 +86,7 @@ from calibration.report.writer import RUN_SOLUTION
 from calibration.season.binning import Season
 from calibration.season.recalibrate import cycle_inputs, run_cycles
 from calibration.season.season_file import read_season
+from calibration.solve.solution import Solution
 from calibration.solve.solvers import band_hz
 from reach_receiver.clock import CompressedClock, ManualClock
 from reach_receiver.config.site import load_site
@@ -346,6 +347,8 @@ def calibration_numbers(path: str) -> float:
     with open_run_file(path) as f:
         cycles = run_cycles(f, path)
         solution = read_solution_group(f[RUN_SOLUTION], path)
+        if not isinstance(solution, Solution):
+            raise TypeError(f"{path}: a per-channel solution; the week's runs fit polynomials")
         rows = [
             solution.design_rows(i.freq_hz, i.gamma_rec, i.source.gamma, i.source.q)
             for i in (cycle_inputs(cycles.by_number, json.loads(g.attrs["handover"]),
