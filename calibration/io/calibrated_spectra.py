@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from ..core.errors import FileFormatError, InvalidDataError
 from ..core.sidereal import apparent_lst_h
-from .hdf5_io import RECEIVER_RUN_FORMAT, PathLike
+from .hdf5_io import RECEIVER_RUN_FORMAT, PathLike, attr_text
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -97,11 +97,6 @@ class RunSpectra:
     sweeps: tuple[str, ...]
 
 
-def _text(value: Any) -> str:
-    if isinstance(value, np.ndarray) and value.shape == ():
-        value = value[()]
-    return value.decode() if isinstance(value, bytes) else str(value)
-
 
 def solution_digest(group: h5py.Group) -> str:
     """SHA-1 of every dataset's name and bytes in a solution group (its identity)."""
@@ -116,9 +111,9 @@ def solution_digest(group: h5py.Group) -> str:
     return digest.hexdigest()[:16]
 
 
-def _site(f: h5py.File, path: str) -> Site:
+def read_site(f: h5py.File, path: str) -> Site:
     try:
-        document = yaml.safe_load(_text(f["run/site"][()])) or {}
+        document = yaml.safe_load(attr_text(f["run/site"][()])) or {}
         place = document["site"]
         return Site(
             str(place.get("name", "unnamed site")),
@@ -164,7 +159,7 @@ def open_run_file(path: str) -> h5py.File:
         f = h5py.File(path, "r")
     except OSError as err:
         raise FileFormatError(f"{path}: not an HDF5 run file ({err})") from err
-    fmt = _text(f.attrs.get("format", ""))
+    fmt = attr_text(f.attrs.get("format", ""))
     if fmt != RECEIVER_RUN_FORMAT or "measurements" not in f:
         f.close()
         raise FileFormatError(
@@ -180,15 +175,15 @@ def _read(f: h5py.File, where: str) -> RunSpectra:
     solutions: list[SolutionRecord] = []
     rows: list[dict[str, Any]] = []
     for g in groups:
-        kind = _text(g.attrs["kind"])
+        kind = attr_text(g.attrs["kind"])
         if kind == "solution" and "solution" in g:
             solutions.append(SolutionRecord(
                 solution_digest(g["solution"]), where, g.name.rsplit("/", 1)[-1],
-                float(g.attrs["timestamp"]), _text(g["solution"].attrs.get("method", "")),
+                float(g.attrs["timestamp"]), attr_text(g["solution"].attrs.get("method", "")),
             ))
         elif kind == "calibrated":
-            rows.append(_spectrum(g, by_number, where, len(solutions) - 1))
-        elif kind == "check" and _text(g.attrs["name"]).startswith("rfi_night_"):
+            rows.append(spectrum_row(g, by_number, where, len(solutions) - 1))
+        elif kind == "check" and attr_text(g.attrs["name"]).startswith("rfi_night_"):
             _night_flags(g, rows)
     if not rows:
         raise InvalidDataError(
@@ -199,7 +194,7 @@ def _read(f: h5py.File, where: str) -> RunSpectra:
     for row in rows[1:]:
         if row["freq"].shape != freq.shape or not np.allclose(row["freq"], freq, rtol=1e-9):
             raise InvalidDataError(f"{where}: calibrated spectra on different frequency grids")
-    site = _site(f, where)
+    site = read_site(f, where)
     times = np.array([r["time"] for r in rows])
 
     def stack(key: str) -> FloatArray:
@@ -207,7 +202,7 @@ def _read(f: h5py.File, where: str) -> RunSpectra:
 
     return RunSpectra(
         path=where,
-        run_name=_text(f.attrs.get("name", os.path.basename(os.path.dirname(where)))),
+        run_name=attr_text(f.attrs.get("name", os.path.basename(os.path.dirname(where)))),
         site=site,
         freq_hz=freq,
         names=tuple(r["name"] for r in rows),
@@ -227,7 +222,7 @@ def _read(f: h5py.File, where: str) -> RunSpectra:
 
 def _night_flags(g: h5py.Group, rows: list[dict[str, Any]]) -> None:
     """OR a night's flags (observe's ``rfi_night_<source>`` check) into the spectra it names."""
-    names = json.loads(_text(g.attrs.get("details", "{}"))).get("spectra", [])
+    names = json.loads(attr_text(g.attrs.get("details", "{}"))).get("spectra", [])
     if "flags" not in g or not names:
         return
     flags = np.asarray(g["flags"][()], dtype=bool)
@@ -238,7 +233,7 @@ def _night_flags(g: h5py.Group, rows: list[dict[str, Any]]) -> None:
             row["flags"] = row["flags"] | row_flags
 
 
-def _spectrum(
+def spectrum_row(
     g: h5py.Group, by_number: dict[int, h5py.Group], where: str, solution: int
 ) -> dict[str, Any]:
     """One calibrated measurement as plain arrays, with its time and solution."""
@@ -251,7 +246,7 @@ def _spectrum(
         )
     if solution < 0:
         raise InvalidDataError(f"{name}: no solution stored before this calibrated spectrum")
-    handover = json.loads(_text(g.attrs["handover"]))
+    handover = json.loads(attr_text(g.attrs["handover"]))
     cycles = [n for numbers in handover.get("cycles", {}).values() for n in numbers]
     if len(cycles) != 1 or int(cycles[0]) not in by_number:
         raise InvalidDataError(f"{name}: its hand-over names no single Dicke cycle {cycles}")
@@ -265,7 +260,7 @@ def _spectrum(
     flags |= ~(np.isfinite(mean) & np.isfinite(std) & (radiometer > 0))
     sweeps = ",".join(f"{k}={v}" for k, v in sorted(handover.get("s11", {}).items()))
     return {
-        "name": _text(g.attrs["name"]), "freq": np.asarray(g["frequencies"][()], dtype=float),
+        "name": attr_text(g.attrs["name"]), "freq": np.asarray(g["frequencies"][()], dtype=float),
         "mean": mean, "std_radiometer": radiometer, "std_calibration": calibration,
         "std_reflection": reflection, "flags": flags, "time": time,
         "integration": integration, "solution": solution, "sweeps": f"{where}:{sweeps}",

@@ -100,6 +100,13 @@ _POSITIONS = (("source", "spectra"), ("load", "load_spectra"), ("ns", "ns_spectr
 _TRUTH_TUPLES = ("gain_coefficients", "offset_coefficients_k")
 
 
+def attr_text(value: Any) -> str:
+    """An HDF5 attribute or scalar dataset as text (bytes decoded, a 0-d array unwrapped)."""
+    if isinstance(value, np.ndarray) and value.shape == ():
+        value = value[()]
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
 def software_version() -> str:
     """Name and version of the writing software, as stored in every file."""
     try:
@@ -111,10 +118,6 @@ def software_version() -> str:
 def _json(value: Mapping[str, Any]) -> str:
     """JSON of metadata; numpy values become lists/scalars, anything else its ``str``."""
     return json.dumps(dict(value), default=lambda v: getattr(v, "tolist", lambda: str(v))())
-
-
-def _as_str(value: Any) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 @contextlib.contextmanager
@@ -160,15 +163,15 @@ def _open(path: PathLike, file_format: str | tuple[str, ...]) -> Iterator[Any]:
         raise FileFormatError(f"{p}: not a readable HDF5 file ({err})") from err
     with f:
         found = f.attrs.get("format")
-        if found is not None and _as_str(found) not in formats:
+        if found is not None and attr_text(found) not in formats:
             expected = " or ".join(repr(k) for k in formats)
-            raise FileFormatError(f"{p}: is a {_as_str(found)!r} file, expected {expected}")
+            raise FileFormatError(f"{p}: is a {attr_text(found)!r} file, expected {expected}")
         version = f.attrs.get("format_version")
         if version is None and RUN_FORMAT not in formats:
             raise FileFormatError(f"{p}: no 'format_version' attribute at the root")
-        if version is not None and _as_str(version).split(".")[0] != _MAJOR:
+        if version is not None and attr_text(version).split(".")[0] != _MAJOR:
             raise FileFormatError(
-                f"{p}: format_version {_as_str(version)!r} has an unknown major version; "
+                f"{p}: format_version {attr_text(version)!r} has an unknown major version; "
                 f"this reader understands {_MAJOR}.x"
             )
         yield f
@@ -199,12 +202,12 @@ def _attr(obj: Any, name: str, path: PathLike) -> Any:
 
 
 def _names(obj: Any, key: str) -> list[str] | None:
-    return [_as_str(n) for n in np.atleast_1d(obj.attrs[key])] if key in obj.attrs else None
+    return [attr_text(n) for n in np.atleast_1d(obj.attrs[key])] if key in obj.attrs else None
 
 
 def _metadata(f: Any, path: PathLike) -> dict[str, Any]:
     with contextlib.suppress(json.JSONDecodeError):
-        value = json.loads(_as_str(f.attrs.get("metadata", "{}")))
+        value = json.loads(attr_text(f.attrs.get("metadata", "{}")))
         if isinstance(value, dict):
             return value
     raise FileFormatError(f"{path}: root attribute 'metadata' is not a JSON object")
@@ -348,7 +351,7 @@ PLACEHOLDER_POWERS, MEASURED_POWERS = "placeholder", "measured"
 def _root_string(path: PathLike, name: str) -> str | None:
     with _open(path, RUN_FORMATS) as f:
         value = f.attrs.get(name)
-    return None if value is None else _as_str(value)
+    return None if value is None else attr_text(value)
 
 
 def run_noise_source_model(path: PathLike) -> str | None:
@@ -457,7 +460,7 @@ def read_run_layout(f: Any, path: PathLike) -> RunLayout:
 def _basis(obj: Any, path: PathLike, prefix: str = "") -> PolynomialBasis:
     try:
         return PolynomialBasis(
-            _as_str(_attr(obj, f"{prefix}kind", path)),  # type: ignore[arg-type]
+            attr_text(_attr(obj, f"{prefix}kind", path)),  # type: ignore[arg-type]
             float(_attr(obj, f"{prefix}f_lo_hz", path)),
             float(_attr(obj, f"{prefix}f_hi_hz", path)),
         )

@@ -29,7 +29,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .hdf5_io import PathLike
+from .hdf5_io import PathLike, attr_text
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -86,14 +86,10 @@ class RunRecords:
     reason: str = ""
 
 
-def _text(value: Any) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
-
-
 def _json(value: Any) -> Any:
     with contextlib.suppress(json.JSONDecodeError, TypeError):
-        return json.loads(_text(value))
-    return _text(value)
+        return json.loads(attr_text(value))
+    return attr_text(value)
 
 
 def file_software(f: Any) -> str:
@@ -110,7 +106,7 @@ def _temperature_log(f: Any) -> TemperatureLog | None:
         return None
     times = np.asarray(g["timestamps"][()], dtype=float)
     values = np.asarray(g["values"][()], dtype=float).reshape(times.size, -1)
-    channels = tuple(_text(c) for c in np.atleast_1d(g.attrs.get("channels", [])))
+    channels = tuple(attr_text(c) for c in np.atleast_1d(g.attrs.get("channels", [])))
     if len(channels) != values.shape[1]:
         channels = tuple(f"channel {i}" for i in range(values.shape[1]))
     return TemperatureLog(times, values, channels)
@@ -132,7 +128,7 @@ def _checks(f: Any) -> tuple[Check, ...]:
         return ()
     return tuple(
         Check(
-            _text(item.attrs.get("name", key)),
+            attr_text(item.attrs.get("name", key)),
             bool(item.attrs.get("passed", False)),
             _json(item.attrs.get("details", "{}")) or {},
         )
@@ -146,7 +142,8 @@ def _events(f: Any) -> tuple[tuple[float, str, str], ...]:
         return ()
     rows = zip(g["timestamps"][()], g["kinds"][()], g["messages"][()], strict=True)
     return tuple(
-        (float(t), _text(k), _text(m)) for t, k, m in rows if _text(k) not in PROGRESS_EVENTS
+        (float(t), attr_text(k), attr_text(m))
+        for t, k, m in rows if attr_text(k) not in PROGRESS_EVENTS
     )
 
 
@@ -157,8 +154,8 @@ def _alarms(f: Any) -> dict[str, tuple[str, int]]:
     for key, item in (g.items() if isinstance(g, h5py.Group) else ()):
         if "_monitoring_" not in key or not {"series", "status"} <= set(item):
             continue
-        keys = [_text(k) for k in np.atleast_1d(item.attrs.get("keys", []))]
-        names = [_text(s) for s in np.atleast_1d(item.attrs.get("status_names", []))]
+        keys = [attr_text(k) for k in np.atleast_1d(item.attrs.get("keys", []))]
+        names = [attr_text(s) for s in np.atleast_1d(item.attrs.get("status_names", []))]
         for series, status in zip(item["series"][()], item["status"][()], strict=True):
             if not (0 <= status < len(names) and 0 <= series < len(keys)):
                 continue
@@ -180,8 +177,8 @@ def read_run_records(path: PathLike) -> RunRecords:
             events=_events(f),
             alarms=_alarms(f),
             software=file_software(f),
-            status=_text(f.attrs.get("status", "")),
-            reason=_text(f.attrs.get("reason", "")),
+            status=attr_text(f.attrs.get("status", "")),
+            reason=attr_text(f.attrs.get("reason", "")),
         )
 
 

@@ -50,7 +50,6 @@ from .hdf5_io import (
     SOLUTION_FORMAT,
     PathLike,
     _array,
-    _as_str,
     _atomic_h5,
     _attr,
     _basis,
@@ -62,6 +61,7 @@ from .hdf5_io import (
     _number,
     _open,
     _orders,
+    attr_text,
 )
 
 
@@ -169,7 +169,7 @@ def read_solution(path: PathLike) -> Solution | ChannelSolution:
 
 def read_solution_group(f: Any, path: PathLike) -> Solution | ChannelSolution:
     """Read a solution from the open HDF5 file or group ``f``; errors name ``path``."""
-    kind = _as_str(f.attrs.get("solution_kind", POLYNOMIAL_KIND))
+    kind = attr_text(f.attrs.get("solution_kind", POLYNOMIAL_KIND))
     if kind == PER_CHANNEL_KIND:
         return _read_channel_solution(f, path)
     if kind != POLYNOMIAL_KIND:
@@ -185,10 +185,10 @@ def read_solution_group(f: Any, path: PathLike) -> Solution | ChannelSolution:
     if np.any(np.isnan(ev_logz) | (ev_logz == np.inf)):  # -inf: a model the data left free
         raise FileFormatError(f"{path}: evidence log_evidence holds NaN or +inf")
     table = {_orders(o, path): float(z) for o, z in zip(ev_orders, ev_logz, strict=True)}
-    model = _as_str(_attr(f, "measurement_model", path))
+    model = attr_text(_attr(f, "measurement_model", path))
     if model not in ("radiometer", "homoscedastic"):
         raise FileFormatError(f"{path}: unknown measurement_model {model!r}")
-    method, calibrators = _as_str(_attr(f, "method", path)), _names(f, "calibrators")
+    method, calibrators = attr_text(_attr(f, "method", path)), _names(f, "calibrators")
     return Solution(
         method,
         basis,
@@ -208,7 +208,7 @@ def _read_channel_solution(f: Any, path: PathLike) -> ChannelSolution:
     log_z = _array(g, "log_evidence", path, "f") if "log_evidence" in g else None
     if log_z is not None and log_z.shape != freq.shape:
         raise FileFormatError(f"{path}: channels/log_evidence {log_z.shape} vs {freq.shape}")
-    method = _as_str(_attr(f, "method", path))
+    method = attr_text(_attr(f, "method", path))
     if method not in ("least_squares", "bayesian"):
         raise FileFormatError(f"{path}: unknown per-channel method {method!r}")
     try:

@@ -30,12 +30,12 @@ from ..core.sidereal import apparent_lst_h
 from ..io.calibrated_spectra import (
     RunSpectra,
     SolutionRecord,
-    _site,
-    _spectrum,
-    _text,
     open_run_file,
+    read_site,
     solution_digest,
+    spectrum_row,
 )
+from ..io.hdf5_io import attr_text
 from .binning import BinnedRun, FloatArray, bin_run
 
 __all__ = ["ROW_ARRAYS", "bin_rows", "count_rows", "read_rows", "rows_per_chunk"]
@@ -105,13 +105,13 @@ def read_rows(path: str, start: int, stop: int) -> RunSpectra:
             if kind == "solution" and "solution" in (g := by_number[number]):
                 solutions.append(SolutionRecord(
                     solution_digest(g["solution"]), path, g.name.rsplit("/", 1)[-1],
-                    float(g.attrs["timestamp"]), _text(g["solution"].attrs.get("method", "")),
+                    float(g.attrs["timestamp"]), attr_text(g["solution"].attrs.get("method", "")),
                 ))
             elif kind == "calibrated":
                 latest[name] = index
                 if start <= index < stop:
-                    lookup = cast(dict[int, Any], by_number)  # _spectrum only looks up
-                    rows[index] = _spectrum(by_number[number], lookup, path, len(solutions) - 1)
+                    lookup = cast(dict[int, Any], by_number)  # spectrum_row only looks up
+                    rows[index] = spectrum_row(by_number[number], lookup, path, len(solutions) - 1)
                 index += 1
             elif kind == "check" and name.startswith("rfi_night_"):
                 _night_flags(by_number[number], rows, latest)
@@ -119,8 +119,8 @@ def read_rows(path: str, start: int, stop: int) -> RunSpectra:
             raise _no_rows(path)
         if not rows:
             raise InvalidDataError(f"{path}: rows {start}-{stop} of {index} asked for")
-        site = _site(f, path)
-        run_name = _text(f.attrs.get("name", os.path.basename(os.path.dirname(path))))
+        site = read_site(f, path)
+        run_name = attr_text(f.attrs.get("name", os.path.basename(os.path.dirname(path))))
     ordered = [rows[i] for i in sorted(rows)]
     freq = ordered[0]["freq"]
     for row in ordered[1:]:
@@ -145,7 +145,7 @@ def read_rows(path: str, start: int, stop: int) -> RunSpectra:
 
 def _night_flags(g: h5py.Group, rows: dict[int, dict[str, Any]], latest: dict[str, int]) -> None:
     """OR a night's flags into the rows of this chunk it names (each name's latest row)."""
-    names = json.loads(_text(g.attrs.get("details", "{}"))).get("spectra", [])
+    names = json.loads(attr_text(g.attrs.get("details", "{}"))).get("spectra", [])
     if "flags" not in g or not names:
         return
     flags = np.asarray(g["flags"][()], dtype=bool)

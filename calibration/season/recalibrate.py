@@ -38,7 +38,7 @@ from ..checks.rfi import flag_sky
 from ..checks.rfi_night import flag_night
 from ..core.errors import FileFormatError, InvalidDataError
 from ..io.calibrated_spectra import solution_digest
-from ..io.hdf5_io import RECEIVER_RUN_FORMAT, software_version
+from ..io.hdf5_io import RECEIVER_RUN_FORMAT, attr_text, software_version
 from ..io.receiver_grid import band_channels, interpolate_s11
 from ..io.solution_file import write_solution_group
 from ..model.data import Integration, SourceData, check_source
@@ -73,12 +73,6 @@ class CycleInputs:
     gamma_rec: NDArray[np.complex128]
     gamma_rec_std: FloatArray | None
     source: SourceData
-
-
-def _text(value: Any) -> str:
-    if isinstance(value, np.ndarray) and value.shape == ():
-        value = value[()]
-    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def _reflection(g: h5py.Group, freq: FloatArray, where: str) -> tuple[
@@ -143,17 +137,18 @@ class RunCycles:
 
 def run_cycles(f: h5py.File, where: str) -> RunCycles:
     """The calibrated measurements of an open receiver's run file (refused without any)."""
-    fmt = _text(f.attrs.get("format", ""))
+    fmt = attr_text(f.attrs.get("format", ""))
     if fmt != RECEIVER_RUN_FORMAT or "measurements" not in f:
         raise FileFormatError(
             f"{where}: not a receiver's run file (format {fmt!r}); recalibrate reads the "
             "run.h5 files reach-run writes"
         )
     groups = sorted(f["measurements"].values(), key=lambda g: int(g.attrs["sequence"]))
-    calibrated = tuple(g for g in groups if _text(g.attrs["kind"]) == "calibrated")
+    calibrated = tuple(g for g in groups if attr_text(g.attrs["kind"]) == "calibrated")
     nights = tuple(
         g for g in groups
-        if _text(g.attrs["kind"]) == "check" and _text(g.attrs["name"]).startswith("rfi_night_")
+        if attr_text(g.attrs["kind"]) == "check"
+        and attr_text(g.attrs["name"]).startswith("rfi_night_")
     )
     if not calibrated:
         raise InvalidDataError(
@@ -172,7 +167,7 @@ def check_run(path: str, solution: AnySolution) -> int:
             where = f"{path}:{g.name}"
             if "handover" not in g.attrs:
                 raise InvalidDataError(f"{where}: no hand-over (a run file older than the season)")
-            inputs = cycle_inputs(cycles.by_number, json.loads(_text(g.attrs["handover"])),
+            inputs = cycle_inputs(cycles.by_number, json.loads(attr_text(g.attrs["handover"])),
                                   band, where)
             check_grid(solution.metadata, inputs.freq_hz, inputs.channel_width_hz, path)
         return len(cycles.calibrated)
@@ -191,7 +186,7 @@ def _thresholds(nights: tuple[h5py.Group, ...]) -> dict[str, float]:
     """Each spectrum name's flagging threshold, as its night's check recorded it."""
     out: dict[str, float] = {}
     for g in nights:
-        details = json.loads(_text(g.attrs.get("details", "{}")))
+        details = json.loads(attr_text(g.attrs.get("details", "{}")))
         for name in details.get("spectra", []):
             out[name] = float(details.get("threshold_sigma", DEFAULT_THRESHOLD))
     return out
@@ -237,7 +232,7 @@ def write_recalibrated_run(
         thresholds = _thresholds(cycles.nights)
         out.attrs.update(
             format=RECEIVER_RUN_FORMAT, format_version="1.0", software=software_version(),
-            name=_text(f.attrs.get("name", os.path.basename(os.path.dirname(path)))),
+            name=attr_text(f.attrs.get("name", os.path.basename(os.path.dirname(path)))),
             status="recalibrated", recalibrated_from=os.path.abspath(path),
             solution_file=solution_file,
         )
@@ -251,14 +246,14 @@ def write_recalibrated_run(
         by_name: dict[str, tuple[str, FloatArray, NDArray[np.bool_], FloatArray]] = {}
         for g in cycles.calibrated:
             where = f"{path}:{g.name}"
-            handover = json.loads(_text(g.attrs["handover"]))
+            handover = json.loads(attr_text(g.attrs["handover"]))
             inputs = cycle_inputs(cycles.by_number, handover, band, where)
             check_grid(solution.metadata, inputs.freq_hz, inputs.channel_width_hz, path)
             spectrum = solution.calibrate(
                 inputs.freq_hz, inputs.gamma_rec, inputs.source, inputs.channel_width_hz,
                 inputs.gamma_rec_std,
             )
-            name = _text(g.attrs["name"])
+            name = attr_text(g.attrs["name"])
             flags = flag_sky(spectrum.mean, thresholds.get(name, DEFAULT_THRESHOLD),
                              inputs.freq_hz)
             number = int(g.attrs["sequence"])
@@ -292,7 +287,7 @@ def _night(
     by_name: Mapping[str, tuple[str, FloatArray, NDArray[np.bool_], FloatArray]],
 ) -> None:
     """The night's flags of the recalibrated spectra the original check named."""
-    details = json.loads(_text(night.attrs.get("details", "{}")))
+    details = json.loads(attr_text(night.attrs.get("details", "{}")))
     names = [n for n in details.get("spectra", []) if n in by_name]
     if not names:
         return
@@ -303,7 +298,7 @@ def _night(
         np.stack([by_name[n][1] for n in names]), np.stack([by_name[n][2] for n in names]),
         freq, threshold,
     )
-    g = _measurement(measurements, "check", _text(night.attrs["name"]),
+    g = _measurement(measurements, "check", attr_text(night.attrs["name"]),
                      int(night.attrs["sequence"]), float(night.attrs["timestamp"]))
     g.attrs.update(passed=True, details=json.dumps(
         {"spectra": names, "threshold_sigma": threshold, **flags.summary()}
