@@ -67,7 +67,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 from scipy.linalg import cho_factor, cho_solve
 
 from ..core.constants import DEFAULT_ALPHA
@@ -313,6 +312,8 @@ def check_consistency(
     ``alpha`` is the round's false-alarm rate; ``offset_sd_k`` the prior width of a wrong
     temperature, used only to name the calibrator that explains a disagreement best.
     """
+    from scipy import stats
+
     if not 0 < alpha < 1:
         raise InvalidDataError(f"the false-alarm rate alpha must be in (0, 1), got {alpha}")
     if not offset_sd_k > 0:

@@ -53,7 +53,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import binary_dilation, label, median_filter
-from scipy.signal import savgol_filter
 
 from ..core.errors import InvalidDataError
 from ..model.data import CalibrationData
@@ -107,6 +106,7 @@ def _trend(x: FloatArray, flags: BoolArray, window: int, degree: int) -> FloatAr
     slope per channel exceeds the noise (a 10 m cable source's ripple, 0.2 % per channel
     against 0.1 % noise), which hid every spike there.
     """
+    from scipy.signal import savgol_filter
     u = np.linspace(-1.0, 1.0, x.size)
     coef = np.polynomial.legendre.legfit(u[~flags], np.log(x[~flags]), degree)
     base = np.exp(np.polynomial.legendre.legval(u, coef))

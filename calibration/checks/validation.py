@@ -24,7 +24,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..choice.model_checks import fit_warnings
 from ..core.errors import CalibrationError
@@ -108,6 +107,7 @@ def _rms(values: FloatArray) -> float:
 
 def held_out(solution: AnySolution, data: CalibrationData, name: str) -> HeldOut:
     """Calibrate ``data``'s calibrator ``name`` with ``solution`` and score it (module doc)."""
+    from scipy import stats
     source = data.sources[name]
     spectrum = solution.calibrate(
         data.freq_hz, data.gamma_rec, source,

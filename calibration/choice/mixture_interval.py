@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import special, stats
 
 from ..model.polynomial_model import full_indices
 from .averaging import MixturePosterior
@@ -102,6 +101,7 @@ class ChannelMixture:
         self, x: FloatArray, means: FloatArray, scales: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """The mixture's CDF and density at ``x`` ``(n,)`` from components ``(M, n)``."""
+        from scipy import special, stats
         point = scales == 0.0  # a component with no spread: a step at its mean
         safe = np.where(point, 1.0, scales)
         t = np.where(point, np.where(x >= means, np.inf, -np.inf), (x - means) / safe)
@@ -115,6 +115,7 @@ class ChannelMixture:
 
 
 def _ppf(q: float, nu: float) -> float:
+    from scipy import stats
     return float(stats.norm.ppf(q) if np.isinf(nu) else stats.t.ppf(q, nu))
 
 

@@ -53,8 +53,6 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
-from scipy.special import gammaln
 
 from ..core.errors import IllPosedError
 from ..model.noise_waves import N_PARAMETERS
@@ -208,6 +206,7 @@ def maximise(
     returned with it, ``None`` where no scale gives a finite one. Bounded quasi-Newton
     with the analytic gradient (:func:`evidence_gradient`) from ``start``.
     """
+    from scipy.optimize import minimize
 
     def negative(x: FloatArray) -> tuple[float, FloatArray]:
         try:
@@ -240,6 +239,7 @@ def maximise_each(
     the best alone. Should the starts leave a model ill-posed, each decay is searched
     alone.
     """
+    from scipy.optimize import minimize
     rows, width = starts.shape
     decay = np.asarray(decays, dtype=float)
 
@@ -317,6 +317,7 @@ def _mode(
 
 
 def _t_log_density(x: FloatArray, mean: FloatArray, chol: FloatArray, dof: float) -> FloatArray:
+    from scipy.special import gammaln
     d = mean.size
     z = np.linalg.solve(chol, (x - mean).T).T
     return (

@@ -69,7 +69,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq
 
 from ..core.errors import IllPosedError
 from ..model.noise_waves import N_PARAMETERS
@@ -185,6 +184,7 @@ def width_scale(widths: ParameterScales, prior: ShrinkagePrior) -> float | None:
     ``sum_k (tau_k^2 - s^2) / (tau_k^2 + s^2) = 0``, one root between the smallest and
     largest width (the geometric mean of two). ``None`` where every width is on the floor.
     """
+    from scipy.optimize import brentq
     tau = np.asarray(widths.tau_k)
     tau = tau[tau > ON_FLOOR * prior.tau_min_k]
     if tau.size == 0:

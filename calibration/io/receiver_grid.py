@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 __all__ = ["band_channels", "interpolate_s11"]
 
@@ -32,6 +31,7 @@ def interpolate_s11(
     freq_s11: NDArray[Any], s11: NDArray[Any], freq_hz: NDArray[Any]
 ) -> NDArray[np.complex128] | None:
     """The reflection at ``freq_hz``; ``None`` when the sweep does not cover them."""
+    from scipy.interpolate import CubicSpline
     f_s11 = np.asarray(freq_s11, dtype=float)
     f = np.asarray(freq_hz, dtype=float)
     if f_s11.size < 4 or f.min() < f_s11[0] or f.max() > f_s11[-1]:

@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import fftconvolve
 
 from ..core.errors import InvalidDataError
 from .simulate import NC346A_ENR_DB, enr_noise_temperature
@@ -151,6 +150,7 @@ def sample_reflections(
     is already rigid across the sweep to 3 %).
     Pushing each draw through a solver gives the reflection error's share of its error bars.
     """
+    from scipy.signal import fftconvolve
     g = np.asarray(gamma, dtype=complex)
     if g.ndim != 1:
         raise InvalidDataError("sample_reflections takes one reflection per channel (1-D)")

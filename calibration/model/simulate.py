@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 from ..core.constants import ITPM_CHANNEL_WIDTH_HZ, REACH_CALIBRATORS
 from .basis import BasisKind, PolynomialBasis
@@ -165,6 +164,7 @@ def vna_reading(
     last), the sweep's points, and the noisy points are carried onto every channel by
     cubic splines through their real and imaginary parts.
     """
+    from scipy.interpolate import CubicSpline
     g = np.asarray(gamma_true, dtype=complex)
     if step_channels <= 1:
         noise = rng.standard_normal(g.shape) + 1j * rng.standard_normal(g.shape)

@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.linalg import LinAlgError
 from numpy.typing import NDArray
-from scipy.special import gammaln
 
 from ..core.errors import IllPosedError
 from ..model.noise_waves import N_PARAMETERS, PARAMETERS
@@ -275,6 +274,7 @@ def log_evidence_from(
 
     ``occam`` is ``-1/2 log|Lambda| - 1/2 log|V_0|``.
     """
+    from scipy.special import gammaln
     base = -0.5 * normal.n_rows * LOG_2PI + 0.5 * normal.sum_log_weights
     if scale_prior is None:
         return np.asarray(base - 0.5 * q_min + occam)

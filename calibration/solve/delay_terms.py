@@ -44,7 +44,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
 
 from ..choice.model_fit import OrderChoice, fit
 from ..core.errors import IllPosedError
@@ -211,6 +210,7 @@ def refined(
     ripple stopped at the window's edge, 620 nats below the peak), at most
     :data:`REFINE_ROUNDS` rounds.
     """
+    from scipy.optimize import minimize_scalar
     span = 0.25 / float(freq_hz[-1] - freq_hz[0])
     for _ in range(REFINE_ROUNDS):
         assert isinstance(model.basis, DelayBasis)

@@ -45,7 +45,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from calibration.model.noise_waves import PARAMETERS
 from calibration.solve.solution import CalibratedSpectrum
@@ -122,6 +121,7 @@ def sigma_of(log_p: float) -> float:
 
     Beyond ``p = 1e-300`` from the tail's asymptotic form, ``p/2 ~ phi(z) / z``.
     """
+    from scipy import stats
     if log_p > math.log(1e-300):
         return float(stats.norm.isf(math.exp(log_p) / 2.0))
     z = math.sqrt(-2.0 * log_p)
@@ -136,6 +136,7 @@ def _chi2_log_sf(chi2: float, dof: int) -> float:
     Where scipy's underflows, the leading term of the upper incomplete gamma function,
     ``Gamma(k/2, x/2) ~ (x/2)^(k/2 - 1) exp(-x/2)``.
     """
+    from scipy import stats
     log_sf = float(stats.chi2.logsf(chi2, dof))
     if math.isfinite(log_sf):
         return log_sf
@@ -240,6 +241,7 @@ def compare_on_source(
     ``template`` (K per channel), the shape an expected kind of drift gives the
     difference, adds the matched test along it.
     """
+    from scipy import stats
     freq = np.asarray(new.freq_hz, dtype=float)
     if old.freq_hz.shape != freq.shape or not np.allclose(old.freq_hz, freq):
         raise ValueError("the two calibrated spectra must share their channels")

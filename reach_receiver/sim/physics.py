@@ -28,6 +28,7 @@ import math
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,7 +38,6 @@ from calibration.model.data import CalibrationData, SourceData
 from calibration.model.noise_waves import dicke_powers
 from calibration.model.reflections import lna_reflection, reach_source_reflection, resistor
 from calibration.model.simulate import ITPM_CHANNEL_WIDTH_HZ, ReceiverTruth, enr_noise_temperature
-from calibration.solve.solvers import NoiseWaveSolution
 from reach_receiver.clock import Clock
 from reach_receiver.frontend.layout import (
     MS2_TO_LNA,
@@ -50,6 +50,9 @@ from reach_receiver.frontend.layout import (
 )
 from reach_receiver.sim.drift import NoiseWaveDrift
 from reach_receiver.sim.effects import SimEffects
+
+if TYPE_CHECKING:  # the engine's solvers: only the simulator's checks take a solution
+    from calibration.solve.solvers import NoiseWaveSolution
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
