@@ -4,8 +4,10 @@ The simulated receiver runs at its default 3000x; a short calibrating schedule (
 calibrators and the antenna, a minute per Dicke position, the VNA and the S11s, a solve)
 runs three times, each with the daemon's :class:`~reach_receiver.monitor.Monitor` watching
 (as ``reachd`` runs a job; its report is not drawn, to keep the test short). The first
-run has no previous solution; the second compares with the first on the antenna and must
-find the receiver stable (a passed check, no alarm); before the third the simulated LNA
+run has no previous solution; the second measures no antenna spectrum (as an observing
+run calibrates before its first antenna cycle), so it compares with the first on the
+antenna as the first run measured it, and must find the receiver stable (a passed check,
+no alarm); before the third the simulated LNA
 warms by 20 K (:class:`~reach_receiver.sim.drift.NoiseWaveDrift`), and its calibration
 must raise the ``calibration drift`` alarm in words, with the drift's size and band, and
 store a failed check. How large a drift must be to be seen, and how often a stable
@@ -35,6 +37,9 @@ steps:
   - calibrate: {}
   - safe: {}
 """
+#: The second run's: no antenna spectrum before the solve.
+NO_ANTENNA = CALIBRATING.replace("sources: [cold, hot, c10open, c10short, ant]",
+                                 "sources: [cold, hot, c10open, c10short]")
 #: How much warmer the LNA is at the third calibration (K).
 LNA_K = 20.0
 
@@ -50,9 +55,10 @@ def three(tmp_path_factory):
     with SimulatedReceiver(SimulationSettings(spectrum_period_s=60.0)) as sim:
         site = dataclasses.replace(sim.site(), monitoring=MonitoringSettings(cadence_s=600.0))
         monitor = Monitor(site, sim.clock, tmp / "state", tmp)
-        schedule = compile_text(CALIBRATING, "drift.yaml", site=site)
+        schedules = [compile_text(text, "drift.yaml", site=site)
+                     for text in (CALIBRATING, NO_ANTENNA, CALIBRATING)]
         checks, alarms = [], []
-        for index in range(3):
+        for index, schedule in enumerate(schedules):
             if index == 2:  # the LNA warms by LNA_K within minutes, then stays
                 elapsed = sim.clock.now() - sim.physics._t0
                 drift = NoiseWaveDrift(ramp_k_per_day=1440.0, start_s=elapsed, limit_k=LNA_K)
@@ -68,7 +74,10 @@ def test_a_stable_receiver_passes_the_drift_check(three):
     checks, alarms, _ = three
     assert checks[0] is None  # nothing to compare with
     assert checks[1]["passed"], checks[1]
-    assert checks[1]["details"]["previous"].startswith("run ")
+    details = checks[1]["details"]
+    assert details["previous"].startswith("run ")
+    assert details["source"] == "ant"  # not the calibrator the run validates on
+    assert details["source_measured_in"] == details["previous"]
     assert alarms[0] == alarms[1] == []
 
 
@@ -82,6 +91,7 @@ def test_the_warmed_lna_raises_the_alarm_with_size_and_band(three):
     assert not checks[2]["passed"]
     details = checks[2]["details"]
     assert details["sigma"] > details["threshold_sigma"]
+    assert details["source_measured_in"] == "this run"
     (raised,) = [a for event, a, _ in monitor.board.history if event == "raised"]
     assert raised.id == f"{DRIFT_ALARM}: {DRIFT_METRIC}"
     print(f"\n{text}")
