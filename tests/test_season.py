@@ -108,10 +108,12 @@ def run_spectra(night: Night, spectra, times: np.ndarray, flags=None, path="mem"
 
 
 def write_run(directory: Path, night: Night, spectra, times, flags=None,
-              night_flags=None) -> Path:
+              night_flags=None, powers=None) -> Path:
     """A receiver run file with the solution, each cycle and its calibrated spectrum.
 
     ``night_flags`` ``(cycle, channel)``: also the observe step's ``rfi_night_ant`` check.
+    ``powers(i)``: cycle ``i``'s power at each Dicke position, on every channel from 0 Hz
+    as the spectrometer stores them (by default 1 on the band's channels only).
     """
     freq = spectra[0].freq_hz
     store = RunStore(directory, name="night", schedule_files=[], site_yaml=SITE_YAML,
@@ -123,10 +125,13 @@ def write_run(directory: Path, night: Night, spectra, times, flags=None,
         s11_lna = store.add_s11("lna", freq, night.sim.data.gamma_rec, timestamp=times[0],
                                 settings={}, calibrated=True)
         store.add_solution(night.solution, timestamp=times[0] - 60, verification={})
+        width = night.sim.data.channel_width_hz
+        stored = freq.size if powers is None else round(freq[-1] / width) + 1
         for i, (spectrum, t) in enumerate(zip(spectra, times, strict=True)):
             positions = ("source", "load", "ns")
             number = store.add_dicke(
-                "ant", spectra={p: np.ones((1, freq.size)) for p in positions},
+                "ant", spectra={p: np.full((1, stored), 1.0 if powers is None
+                                           else powers(i)[p]) for p in positions},
                 timestamps={p: [t - 5, t + 5] for p in positions},
                 integration_s=dict.fromkeys(positions, 300.0),
                 n_spectra=dict.fromkeys(positions, 2), temperature_k=None,

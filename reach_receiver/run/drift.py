@@ -29,17 +29,20 @@ check's.
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+import h5py
 import numpy as np
 from numpy.typing import NDArray
 
 from calibration.core.errors import CalibrationError
 from calibration.model.data import CalibrationData, SourceData
 from calibration.model.noise_waves import design_terms
+from calibration.season.recalibrate import cycle_inputs, run_cycles
 from calibration.solve.solvers import AnySolution, band_hz
 from reach_receiver.config.monitoring import DEFAULT_ALARMS, DRIFT_ALARM, DRIFT_METRIC
 from reach_receiver.errors import ReceiverError
@@ -68,11 +71,26 @@ class Previous:
     antenna_freq_hz: NDArray[np.float64] | None = None
 
 
-def _antenna_of(contents: RunContents) -> tuple[SourceData | None, NDArray[np.float64] | None]:
-    """The antenna of a run's hand-over (the data a solve of it reads), if it measured one."""
+def antenna_of_run(
+    contents: RunContents, band: tuple[float, float]
+) -> tuple[SourceData | None, NDArray[np.float64] | None]:
+    """The antenna as a run measured it, if it did, on the solution's ``band``.
+
+    An observing run's last calibrated antenna cycle (its own hand-over: the cycle and the
+    S11s it was calibrated with), else the antenna of the run's hand-over (the data a
+    solve of it reads: a calibrating run that measured the antenna).
+    """
     if not any(m.kind == "dicke" and m.name == ANTENNA for m in contents.measurements):
         return None, None
     try:
+        if contents.merged and contents.of_kind("calibrated"):
+            where = str(contents.path)
+            with h5py.File(contents.path, "r") as f:
+                cycles = run_cycles(f, where)
+                last = cycles.calibrated[-1]
+                inputs = cycle_inputs(cycles.by_number, json.loads(last.attrs["handover"]),
+                                      band, where)
+            return inputs.source, inputs.freq_hz
         data, others = contents.calibration_data()
     except (ReceiverError, CalibrationError, OSError, ValueError, KeyError) as err:
         log.info("calibration drift: the previous run's antenna cannot be read: %s", err)
@@ -100,7 +118,7 @@ def previous_solution(run: RunContext, directory: Path | None = None) -> Previou
         except (ReceiverError, CalibrationError, OSError, ValueError, KeyError):
             continue
         if solution is not None:
-            antenna, freq = _antenna_of(contents)
+            antenna, freq = antenna_of_run(contents, band_hz(solution))
             return Previous(solution, stored[-1].timestamp, f"run {path.name}", antenna, freq)
     return None
 
