@@ -11,10 +11,11 @@ the same channels). Only where neither run measured the antenna is the compariso
 on this calibration's validation source, a calibrator: each solution is pinned to its own
 measurement of it, where the model averaging's spread between two solutions shows most
 (over six simulated stable weeks its differences scattered 1.18 times their stated
-variance against 0.8-1.0 on the antenna). and :func:`~reach_receiver.run.checks.compare_on_source`
-tests the difference against both solutions' credible intervals (one chi-square per
-calibration over 5 MHz sub-bands, and the matched test along the shift that the LNA's
-noise waves scaled together would give: its temperature, the likeliest drift). Both
+variance against 0.8-1.0 on the antenna).
+:func:`~reach_receiver.run.checks.compare_on_source` tests the difference against both
+solutions' credible intervals (one chi-square per calibration over 5 MHz sub-bands, and
+the matched test along the shift that the LNA's noise waves scaled together would give:
+its temperature, the likeliest drift). Both
 calibrations use this run's receiver S11, so its trace noise is common to them.
 
 The verdict is a check of the run (``calibration_drift``: passed, or the size and band
