@@ -97,7 +97,6 @@ class RunSpectra:
     sweeps: tuple[str, ...]
 
 
-
 def solution_digest(group: h5py.Group) -> str:
     """SHA-1 of every dataset's name and bytes in a solution group (its identity)."""
     digest = hashlib.sha1(usedforsecurity=False)
@@ -112,6 +111,11 @@ def solution_digest(group: h5py.Group) -> str:
 
 
 def read_site(f: h5py.File, path: str) -> Site:
+    """The site a run file records (its ``run/site`` YAML): name, longitude, latitude.
+
+    :class:`~calibration.core.errors.FileFormatError` names ``path`` where it is missing
+    or malformed.
+    """
     try:
         document = yaml.safe_load(attr_text(f["run/site"][()])) or {}
         place = document["site"]
