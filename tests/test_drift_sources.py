@@ -41,11 +41,12 @@ def test_an_observing_run_gives_its_last_calibrated_antenna_cycle(tmp_path):
 
 def test_the_previous_antenna_is_used_only_on_the_same_channels(tmp_path):
     night, path = _observing_run(tmp_path)
-    antenna, freq = antenna_of_run(read_run_file(path), band_hz(night.solution))
-    previous = Previous(night.solution, None, "run night", antenna, freq)
+    previous = Previous(night.solution, None, "run night", read_run_file(path))
     data = night.sim.data
     cold = data.sources["cold"]
-    assert drift_source(cold, previous, data) is antenna
+    used = drift_source(cold, previous, data)
+    assert used.name == "ant"
+    np.testing.assert_allclose(used.q, 1.0 / 4.0)  # the previous run's last antenna cycle
     fewer = data.select(np.arange(data.freq_hz.size) % 2 == 0)
     assert drift_source(cold, previous, fewer) is cold  # another grid: the validation source
     assert drift_source(cold, Previous(night.solution, None, "x"), data) is cold

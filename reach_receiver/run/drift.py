@@ -67,9 +67,8 @@ class Previous:
     solution: AnySolution
     timestamp: float | None
     where: str
-    #: The antenna as that run measured it, and its channels (``None``: it did not).
-    antenna: SourceData | None = None
-    antenna_freq_hz: NDArray[np.float64] | None = None
+    #: That run as stored (``None``: this run), read for its antenna only when needed.
+    contents: RunContents | None = None
 
 
 def antenna_of_run(
@@ -119,8 +118,7 @@ def previous_solution(run: RunContext, directory: Path | None = None) -> Previou
         except (ReceiverError, CalibrationError, OSError, ValueError, KeyError):
             continue
         if solution is not None:
-            antenna, freq = antenna_of_run(contents, band_hz(solution))
-            return Previous(solution, stored[-1].timestamp, f"run {path.name}", antenna, freq)
+            return Previous(solution, stored[-1].timestamp, f"run {path.name}", contents)
     return None
 
 
@@ -130,12 +128,13 @@ def drift_source(validation: SourceData, previous: Previous, data: CalibrationDa
     The antenna if either run measured it on these channels, else this calibration's
     validation source.
     """
-    if validation.name == ANTENNA or previous.antenna is None:
+    if validation.name == ANTENNA or previous.contents is None:
         return validation
-    freq = previous.antenna_freq_hz
-    if freq is None or freq.shape != data.freq_hz.shape or not np.allclose(freq, data.freq_hz):
+    antenna, freq = antenna_of_run(previous.contents, band_hz(previous.solution))
+    if antenna is None or freq is None or freq.shape != data.freq_hz.shape \
+            or not np.allclose(freq, data.freq_hz):
         return validation
-    return previous.antenna
+    return antenna
 
 
 def threshold_sigma(run: RunContext) -> float:
